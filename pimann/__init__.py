@@ -1,0 +1,3 @@
+"""pimann: physics-informed MANN trajectory generation for ergoCub (D'Elia et al., IROS 2025)."""
+
+__version__ = "0.1.0"

@@ -1,0 +1,30 @@
+"""The one error type users see: it names the file, where in it, and what is wrong."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+
+class PimannError(Exception):
+    """Bad input. The command line prints `str(error)` as one line and exits non-zero."""
+
+    def __init__(self, path: str | Path | None, problem: str, *, frame: int | None = None):
+        self.path = None if path is None else str(path)
+        self.problem = problem
+        self.frame = frame
+        where = self.path or "<input>"
+        if frame is not None:
+            where += f" (frame {frame})"
+        super().__init__(f"{where}: {problem}")
+
+
+def require_finite(path: str | Path, name: str, values, *, frame_axis: int = 0) -> None:
+    """Raise naming the first frame of `values` that holds a NaN or an infinity."""
+    import numpy as np
+
+    values = np.asarray(values)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        other_axes = tuple(a for a in range(values.ndim) if a != frame_axis)
+        frame = int(np.flatnonzero(bad.any(axis=other_axes) if other_axes else bad)[0])
+        raise PimannError(path, f"{name} holds NaN or infinite values", frame=frame)
