@@ -97,7 +97,9 @@ def _build(kind: Any, value: Any, key: str, source: Path) -> Any:
         raise PimannError(source, errors[0] if errors else f"{key} has the wrong type")
     if origin is Literal:
         if value not in typing.get_args(kind):
-            raise PimannError(source, f"{key} must be one of {list(typing.get_args(kind))}, not {value!r}")
+            raise PimannError(
+                source, f"{key} must be one of {list(typing.get_args(kind))}, not {value!r}"
+            )
         return value
     if origin is list:
         if not isinstance(value, list):

@@ -16,7 +16,11 @@ SHARED_ENV = "PIMANN_SHARED"
 def shared_dir() -> Path:
     """The shared data folder (`$PIMANN_SHARED`, else `<repo>/../shared`)."""
     configured = os.environ.get(SHARED_ENV)
-    return Path(configured).expanduser().resolve() if configured else (REPO_ROOT.parent / "shared").resolve()
+    return (
+        Path(configured).expanduser().resolve()
+        if configured
+        else (REPO_ROOT.parent / "shared").resolve()
+    )
 
 
 def robots_dir() -> Path:

@@ -110,9 +110,7 @@ class Robot:
             raise PimannError(self.urdf_path, f"no frame named {name!r}")
         return self.model.getFrameId(name)
 
-    def configuration(
-        self, base_position, base_quaternion_xyzw, joint_positions
-    ) -> np.ndarray:
+    def configuration(self, base_position, base_quaternion_xyzw, joint_positions) -> np.ndarray:
         """pinocchio q from a base pose and joints in the study's order."""
         q = np.zeros(self.model.nq)
         q[:3] = base_position
@@ -148,7 +146,9 @@ class Robot:
     ) -> np.ndarray:
         """6 x (6 + 26) Jacobian, columns [base twist (body frame), joints in study order]."""
         q = np.asarray(q, dtype=float)
-        jacobian = pin.computeFrameJacobian(self.model, self.data, q, self.frame_id(frame), reference)
+        jacobian = pin.computeFrameJacobian(
+            self.model, self.data, q, self.frame_id(frame), reference
+        )
         return jacobian[:, self.velocity_order]
 
 

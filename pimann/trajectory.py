@@ -49,7 +49,9 @@ class Trajectory:
                 shapes[name] = (getattr(self, name), width)
         for name, (values, width) in shapes.items():
             if np.shape(values) != (n, width):
-                raise PimannError(self.source, f"{name} has shape {np.shape(values)}, expected {(n, width)}")
+                raise PimannError(
+                    self.source, f"{name} has shape {np.shape(values)}, expected {(n, width)}"
+                )
             if name != "contacts":
                 require_finite(self.source, name, values)
 
@@ -84,7 +86,9 @@ def _read_group(group: h5py.Group, path: Path) -> Trajectory:
     if names != list(JOINT_NAMES):
         unknown = sorted(set(names) - set(JOINT_NAMES))
         if unknown or len(names) != N_JOINTS:
-            raise PimannError(path, f"joint_names do not match ergoCub's 26 joints (unknown: {unknown})")
+            raise PimannError(
+                path, f"joint_names do not match ergoCub's 26 joints (unknown: {unknown})"
+            )
         order = [names.index(n) for n in JOINT_NAMES]  # same joints, other order: map by name
         joints = joints[:, order]
         joint_velocities = None if joint_velocities is None else joint_velocities[:, order]

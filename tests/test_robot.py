@@ -46,7 +46,9 @@ def test_frames_and_standing_pose(robot):
     # standing: both soles near the floor, left foot on the left
     assert abs(left.translation[2]) < 0.01 and abs(right.translation[2]) < 0.01
     assert left.translation[1] > 0.05 > -0.05 > right.translation[1]
-    assert np.all(STANDING_JOINTS >= robot.joint_lower) and np.all(STANDING_JOINTS <= robot.joint_upper)
+    assert np.all(STANDING_JOINTS >= robot.joint_lower) and np.all(
+        STANDING_JOINTS <= robot.joint_upper
+    )
     assert 50 < robot.total_mass < 60  # ergoCub ~56 kg
 
 
@@ -82,10 +84,14 @@ def test_knee_moves_only_its_leg(robot):
         robot.frame_placement(q, "data_Pelvis").translation,
         robot.frame_placement(q_bent, "data_Pelvis").translation,
     )
-    moved = robot.frame_placement(q_bent, "l_sole").translation - robot.frame_placement(q, "l_sole").translation
+    moved = (
+        robot.frame_placement(q_bent, "l_sole").translation
+        - robot.frame_placement(q, "l_sole").translation
+    )
     assert np.linalg.norm(moved) > 0.05
     np.testing.assert_allclose(
-        robot.frame_placement(q, "r_sole").translation, robot.frame_placement(q_bent, "r_sole").translation
+        robot.frame_placement(q, "r_sole").translation,
+        robot.frame_placement(q_bent, "r_sole").translation,
     )
 
 
