@@ -62,11 +62,53 @@ class RetargetParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class FeaturesParams:
+    """features: windows, split, normalisation (issue 3)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelParams:
+    """model: MANN architecture (issue 3)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class TrainParams:
+    """train: optimiser, epochs, PI weights, seeds (issue 3)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class RolloutParams:
+    """rollout: autoregressive generation and steering (issue 4)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class EvaluateParams:
+    """evaluate: metrics (issue 4)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class SimulateParams:
+    """simulate: MuJoCo, DCM adjustment, whole-body QP (issue 5)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class FiguresParams:
+    """figures (issue 4)."""
+
+
+@dataclasses.dataclass(frozen=True)
 class Params:
     profile: Literal["paper", "quick"]
     profiles: dict[str, dict[str, Any]]
     data: DataParams
     retarget: RetargetParams
+    features: FeaturesParams
+    model: ModelParams
+    train: TrainParams
+    rollout: RolloutParams
+    evaluate: EvaluateParams
+    simulate: SimulateParams
+    figures: FiguresParams
 
 
 def _build(kind: Any, value: Any, key: str, source: Path) -> Any:
