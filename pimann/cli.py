@@ -1,0 +1,133 @@
+"""The `pimann` command line (ARCHITECTURE Contract 2).
+
+Every subcommand exits 0 on success; on bad input it prints one line naming the file and the
+problem on stderr (no traceback) and exits 2, leaving no partial output (writers are atomic).
+Heavy libraries are imported inside the subcommands so `pimann --help` stays instant.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+from pimann.errors import PimannError
+
+EXIT_BAD_INPUT = 2
+
+
+def _params(args: argparse.Namespace):
+    from pimann.params import load_params
+
+    return load_params(args.params)
+
+
+def _skeleton(args: argparse.Namespace):
+    params = _params(args)
+    name = args.skeleton or params.data.skeleton
+    if name not in params.data.skeletons:
+        raise PimannError(
+            args.params, f"unknown skeleton {name!r}; known: {sorted(params.data.skeletons)}"
+        )
+    return params.data.skeletons[name]
+
+
+def cmd_mocap_info(args: argparse.Namespace) -> None:
+    from pimann.mocap.io import mocap_info
+
+    print(json.dumps(mocap_info(args.file, _skeleton(args)), indent=2))
+
+
+def cmd_retarget(args: argparse.Namespace) -> None:
+    from pimann.mocap.io import read_mocap
+    from pimann.mocap.mirror import mirror_trajectory
+    from pimann.retarget import retarget_motion
+    from pimann.trajectory import write_trajectory
+
+    params = _params(args)
+    motion = read_mocap(args.file, _skeleton(args))
+    trajectory = retarget_motion(motion, params.retarget)
+    if args.mirror:
+        trajectory = mirror_trajectory(trajectory)
+    write_trajectory(args.output, trajectory)
+
+
+def cmd_render(args: argparse.Namespace) -> None:
+    from pimann.render import render_file
+
+    skeleton = _skeleton(args) if args.mocap else None
+    render_file(args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton)
+
+
+def cmd_metrics(args: argparse.Namespace) -> None:
+    from pimann.metrics import trajectory_metrics
+    from pimann.robot import load_robot
+    from pimann.trajectory import read_trajectory
+
+    trajectory = read_trajectory(args.file, args.group)
+    metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
+    print(json.dumps(metrics, indent=2))
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="pimann", description=__doc__.splitlines()[0])
+    parser.add_argument(
+        "--params", type=Path, default=None, help="params.yaml (default: the repo's)"
+    )
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    def add(name: str, handler: Callable, help_text: str) -> argparse.ArgumentParser:
+        command = sub.add_parser(name, help=help_text)
+        command.set_defaults(handler=handler)
+        return command
+
+    info = add("mocap-info", cmd_mocap_info, "format, frames, rate, duration, segments as JSON")
+    info.add_argument("file", type=Path)
+    info.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+
+    retarget = add("retarget", cmd_retarget, "retarget one mocap file to a trajectory file")
+    retarget.add_argument("file", type=Path)
+    retarget.add_argument("-o", "--output", type=Path, required=True)
+    retarget.add_argument("--mirror", action="store_true", help="mirror across the sagittal plane")
+    retarget.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+
+    render = add("render", cmd_render, "draw a trajectory to .gif, .mp4 or a .png strip")
+    render.add_argument("file", type=Path)
+    render.add_argument("-o", "--output", type=Path, required=True)
+    render.add_argument("--group", help="clip group inside a collection file")
+    render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
+    render.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+
+    metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
+    metrics.add_argument("file", type=Path)
+    metrics.add_argument("--group", help="clip group inside a collection file")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    if args.params is None:
+        from pimann.params import DEFAULT_PARAMS
+
+        args.params = DEFAULT_PARAMS
+    logging.basicConfig(
+        level=logging.INFO if args.verbose else logging.WARNING,
+        format="%(levelname)s %(name)s: %(message)s",
+    )
+    try:
+        args.handler(args)
+    except PimannError as error:
+        print(f"pimann {args.command}: {error}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as error:  # unreadable or unwritable path: still one line, no traceback
+        print(f"pimann {args.command}: {error.filename}: {error.strerror}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
