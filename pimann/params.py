@@ -48,6 +48,7 @@ class RetargetParams:
     pelvis_gain: float
     segment_gain: float
     segment_weight: float
+    gain_time_step: float
     posture_cost: float
     iterations_per_frame: int
     solver: str
@@ -62,33 +63,112 @@ class RetargetParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class WindowParams:
+    """Sample times of the base-velocity windows, in seconds from step i (SPEC 4)."""
+
+    input_s: list[float]  # the input window around step i (12 samples)
+    output_s: list[float]  # the predicted future window from step i (7 samples)
+
+
+@dataclasses.dataclass(frozen=True)
 class FeaturesParams:
-    """features: windows, split, normalisation (issue 3)."""
+    """features: windows, split, normalisation (SPEC 4)."""
+
+    input: str  # the retargeted collection, relative to the repository
+    output_dir: str  # one <variant>.h5 per variant
+    window: str  # a key of `windows`
+    windows: dict[str, WindowParams]
+    test_fraction: float  # share of source clips (each with its mirror) held out
+    split_seed: int
 
 
 @dataclasses.dataclass(frozen=True)
 class ModelParams:
     """model: MANN architecture (issue 3)."""
 
+    n_experts: int
+    gating_hidden: int
+    gating_layers: int  # linear layers, input -> hidden ... -> n_experts
+    prediction_hidden: int
+    prediction_layers: int  # linear layers, input -> hidden ... -> output
+    dropout: float
+    activation: Literal["elu"]
+
 
 @dataclasses.dataclass(frozen=True)
 class TrainParams:
-    """train: optimiser, epochs, PI weights, seeds (issue 3)."""
+    """train: optimiser, epochs, PI weights, seeds (SPEC 5, 6)."""
+
+    pi_weights: list[float]  # the DVC matrix: one ensemble of `seeds` per weight
+    seeds: list[int]
+    epochs: int
+    batch_size: int
+    learning_rate: float
+    weight_decay: float  # scaled by 1/sqrt(batches_per_epoch * restart_period)
+    restart_period: int  # epochs of the first cosine cycle (Te)
+    restart_mult: int  # each cycle this many times longer (Tmult)
+    pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
+    eval_batch_size: int  # test-set batches (no effect on the result)
+    device: Literal["auto", "cpu", "cuda"]
 
 
 @dataclasses.dataclass(frozen=True)
 class RolloutParams:
     """rollout: autoregressive generation and steering (issue 4)."""
 
+    k0: float  # 1/s, steering position gain (Eq. lin_pid)
+    k1: float  # 1/s, steering orientation gain (Eq. rot_pid)
+    goal_factor: float  # goal = this x the commanded displacement ahead
+    goal_radius: float  # m, stop within this horizontal distance of the goal
+
 
 @dataclasses.dataclass(frozen=True)
 class EvaluateParams:
     """evaluate: metrics (issue 4)."""
 
+    contact_on_height: float  # m, lowest sole corner below this -> contact (after the delay)
+    contact_off_height: float  # m, above this -> no contact (after the delay)
+    contact_switch_time: float  # s, a condition must hold this long before the trigger switches
+    skating_height: float  # m, foot-skating: foot below this in two adjacent frames ...
+    skating_speed_per_frame: float  # m, ... moving more than this per frame ...
+    skating_rate_hz: float  # ... at this frame rate
+    walk_distance: float  # m, forward base travel that counts as walking
+
 
 @dataclasses.dataclass(frozen=True)
 class SimulateParams:
-    """simulate: MuJoCo, DCM adjustment, whole-body QP (issue 5)."""
+    """simulate: MuJoCo model, footsteps, DCM/ZMP adjustment, whole-body QP IK (SPEC 9)."""
+
+    timestep: float  # s, MuJoCo step
+    control_rate_hz: float  # IK + feedback rate
+    kp_legs_torso: float  # position actuator stiffness, Nm/rad
+    kp_arms: float
+    kp_neck: float
+    kv_ratio: float  # kv = kv_ratio * kp
+    armature: float  # kg m^2 on every joint
+    friction: float
+    speed_scale: float  # the trajectory's time runs this much slower on the robot (0.33x)
+    step_scale: float  # footstep displacements scaled by this (0.4x)
+    min_phase_s: float  # contact phases shorter than this (after scaling) are merged
+    swing_height: float  # m
+    com_height: float  # m, LIPM height and IK CoM height
+    zmp_hold_s: float  # s of double support before the first step
+    end_hold_s: float  # s of double support after the last step
+    foot_half_length: float  # m, support rectangle in the sole frame (x forward)
+    foot_half_width: float
+    zmp_margin: float  # m kept inside the support rectangle by the plan
+    plan_dt: float  # s, DCM/ZMP plan discretisation
+    plan_zmp_weight: float  # ZMP toward the support centre
+    plan_com_weight: float  # CoM toward the generated CoM (if any)
+    plan_rate_weight: float  # smoothness: weight of the ZMP rate
+    k_zmp: float  # ZMP-CoM feedback gains
+    k_com: float
+    zmp_filter_hz: float  # low-pass cut-off of the measured ZMP
+    chest_gain: float  # IK task gains (1/s); feet and CoM track their next-tick targets exactly
+    posture_gain: float
+    posture_cost: float  # weight of the generated joints in the IK
+    ik_solver: str
+    fall_height: float  # m, base below this = fall
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,0 +1,328 @@
+"""The paper's evaluation of a trajectory (SPEC 8): support-foot sliding, drift, foot pitch.
+
+Support-foot velocity RMSE, as the authors compute it: at each frame where a foot is in
+contact, the RMS over the 3 linear (resp. 3 angular) components of that sole's velocity in the
+inertial frame; summed over the trajectory per foot; left and right sums averaged ("total
+RMSE"). The sum grows with the number of frames, so it compares trajectories of equal length
+and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported beside it.
+
+Sole velocities are pinocchio frame velocities (LOCAL_WORLD_ALIGNED: the velocity of the sole
+origin and the sole's angular velocity, both in world axes) with the base velocity from
+central finite differences of q on the configuration manifold (`pinocchio.difference`) and the
+joint velocities from the file when it has them (else the same differences).
+
+Foot-skating ratio (motion-generation convention, defined at 20 fps): the trajectory's sole
+positions and lowest-corner heights are linearly interpolated to `skating_rate_hz`; a pair of
+adjacent frames skates when some foot is below `skating_height` in both and its sole origin
+moves more than `skating_speed_per_frame` horizontally between them; the ratio is the
+fraction of pairs that skate.
+
+Drift: base displacement since the first frame, in the first frame's heading frame (x forward,
+y left), and changes of roll, pitch and (unwrapped) yaw since the first frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+import pandas as pd
+import pinocchio as pin
+
+from pimann.contacts import (
+    FootKinematics,
+    contacts_from_heights,
+    foot_kinematics,
+    frame_period,
+    trajectory_configurations,
+)
+from pimann.errors import PimannError
+from pimann.params import EvaluateParams, load_params
+from pimann.robot import Robot, load_robot
+from pimann.trajectory import Trajectory, iter_collection, read_trajectory
+
+SIDES = ("left", "right")
+
+
+def manifold_velocities(model: pin.Model, configurations: np.ndarray, time: np.ndarray):
+    """(T, nv) velocities by finite differences of q on the manifold (base twist in body frame).
+
+    Second order everywhere (also for uneven time steps): interior frames combine the tangent
+    vectors at q_k towards q_{k-1} and q_{k+1}; the ends use the three-point one-sided formula
+    (tangents at the end frame towards its two neighbours). Two frames: a plain difference.
+    """
+    n = len(configurations)
+
+    def towards(k: int, j: int) -> np.ndarray:
+        return pin.difference(model, configurations[k], configurations[j])
+
+    forward = np.array([towards(k, k + 1) for k in range(n - 1)])
+    backward = np.array([towards(k, k - 1) for k in range(1, n)])
+    steps = np.diff(time)
+    velocities = np.empty((n, model.nv))
+    if n == 2:
+        velocities[0] = forward[0] / steps[0]
+        velocities[1] = -backward[0] / steps[0]
+        return velocities
+    h_b, h_f = steps[:-1, None], steps[1:, None]
+    ahead = forward[1:] / h_f  # slope towards k+1, at frames 1..n-2
+    behind = -backward[:-1] / h_b  # slope from k-1
+    velocities[1:-1] = (h_b * ahead + h_f * behind) / (h_b + h_f)
+
+    def one_sided(near: np.ndarray, far: np.ndarray, a: float, b: float) -> np.ndarray:
+        # slope at 0 of the parabola through (0, 0), (a, near), (b, far)
+        return (near * b * b - far * a * a) / (a * b * (b - a))
+
+    first, last = steps[0], steps[-1]
+    velocities[0] = one_sided(forward[0], towards(0, 2), first, first + steps[1])
+    velocities[-1] = -one_sided(backward[-1], towards(n - 1, n - 3), last, last + steps[-2])
+    return velocities
+
+
+@dataclasses.dataclass
+class _Analysis:
+    """Per-frame quantities every metric and plot is computed from."""
+
+    time: np.ndarray
+    feet: FootKinematics
+    contacts: np.ndarray  # (T, 2) bool
+    contacts_source: str
+    joint_velocities_source: str
+    displacement: np.ndarray  # (T, 3) base, start heading frame
+    angles: np.ndarray  # (T, 3) roll, pitch, yaw changes since the first frame
+
+    @property
+    def rms_linear(self) -> np.ndarray:  # (T, 2)
+        return np.sqrt(np.mean(self.feet.velocities[..., :3] ** 2, axis=-1))
+
+    @property
+    def rms_angular(self) -> np.ndarray:  # (T, 2)
+        return np.sqrt(np.mean(self.feet.velocities[..., 3:] ** 2, axis=-1))
+
+
+def _euler_rpy(rotations: np.ndarray) -> np.ndarray:
+    """(..., 3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    roll = np.arctan2(rotations[..., 2, 1], rotations[..., 2, 2])
+    pitch = np.arcsin(np.clip(-rotations[..., 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(rotations[..., 1, 0], rotations[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def _base_rotations(trajectory: Trajectory) -> np.ndarray:
+    quaternions = np.asarray(trajectory.base_quaternion_xyzw, dtype=float)
+    x, y, z, w = (quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )
+
+
+def base_drift(trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 3) base displacement in the first frame's heading frame, (T, 3) rpy changes."""
+    angles = _euler_rpy(_base_rotations(trajectory))
+    angles[:, 2] = np.unwrap(angles[:, 2])
+    yaw0 = angles[0, 2]
+    cos, sin = math.cos(yaw0), math.sin(yaw0)
+    delta = np.asarray(trajectory.base_position, dtype=float) - trajectory.base_position[0]
+    displacement = np.stack(
+        [
+            cos * delta[:, 0] + sin * delta[:, 1],
+            -sin * delta[:, 0] + cos * delta[:, 1],
+            delta[:, 2],
+        ],
+        axis=-1,
+    )
+    return displacement, angles - angles[0]
+
+
+def _check_time(trajectory: Trajectory) -> np.ndarray:
+    time = np.asarray(trajectory.time, dtype=float)
+    if len(time) < 2:
+        raise PimannError(trajectory.source, f"needs at least 2 frames, has {len(time)}")
+    bad = np.flatnonzero(np.diff(time) <= 0)
+    if len(bad):
+        raise PimannError(
+            trajectory.source, "time is not strictly increasing", frame=int(bad[0]) + 1
+        )
+    return time
+
+
+def _analyse(trajectory: Trajectory, robot: Robot, params: EvaluateParams) -> _Analysis:
+    time = _check_time(trajectory)
+    configurations = trajectory_configurations(robot, trajectory)
+    velocities = manifold_velocities(robot.model, configurations, time)
+    joint_source = "differences"
+    if trajectory.joint_velocities is not None:
+        velocities[:, robot.v_index] = trajectory.joint_velocities
+        joint_source = "file"
+    feet = foot_kinematics(robot, configurations, velocities)
+    if trajectory.contacts is not None:
+        contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
+    else:
+        contacts = contacts_from_heights(feet.heights, frame_period(trajectory), params)
+        contacts_source = "detected"
+    displacement, angles = base_drift(trajectory)
+    return _Analysis(time, feet, contacts, contacts_source, joint_source, displacement, angles)
+
+
+def skating_ratio(
+    time: np.ndarray, positions: np.ndarray, heights: np.ndarray, params: EvaluateParams
+) -> float:
+    """Fraction of adjacent frame pairs (at `skating_rate_hz`) in which some foot skates.
+
+    positions (T, 2, 3) sole origins, heights (T, 2) lowest-corner heights.
+    """
+    grid = np.arange(time[0], time[-1] + 1e-9, 1.0 / params.skating_rate_hz)
+    if len(grid) < 2:
+        return math.nan
+    feet = range(positions.shape[1])
+    xy = np.stack(
+        [np.stack([np.interp(grid, time, positions[:, f, a]) for a in (0, 1)], -1) for f in feet],
+        axis=1,
+    )  # (G, 2, 2)
+    low = np.stack([np.interp(grid, time, heights[:, f]) for f in feet], 1) < params.skating_height
+    moved = np.linalg.norm(np.diff(xy, axis=0), axis=-1) > params.skating_speed_per_frame
+    skates = low[:-1] & low[1:] & moved
+    return float(np.mean(skates.any(axis=1)))
+
+
+def _finite_or_none(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def _mean_where(values: np.ndarray, mask: np.ndarray) -> float | None:
+    return _finite_or_none(values[mask].mean()) if mask.any() else None
+
+
+def trajectory_metrics(
+    trajectory: Trajectory, robot: Robot | None = None, params: EvaluateParams | None = None
+) -> dict[str, Any]:
+    """The paper's metrics of one trajectory, as JSON-serialisable scalars (None: undefined)."""
+    robot = robot or load_robot("retarget")
+    params = params or load_params().evaluate
+    a = _analyse(trajectory, robot, params)
+    contacts = a.contacts
+    metrics: dict[str, Any] = {
+        "source": trajectory.source,
+        "frames": len(a.time),
+        "duration_s": float(a.time[-1] - a.time[0]),
+        "rate_hz": 1.0 / frame_period(trajectory),
+        "contacts_source": a.contacts_source,
+        "joint_velocities_source": a.joint_velocities_source,
+    }
+    for kind, rms in (("linear", a.rms_linear), ("angular", a.rms_angular)):
+        sums = np.where(contacts, rms, 0.0).sum(axis=0)
+        for side, value in zip(SIDES, sums, strict=True):
+            metrics[f"support_rmse_{kind}_{side}"] = float(value)
+        metrics[f"support_rmse_{kind}_total"] = float(sums.mean())
+        metrics[f"support_rmse_{kind}_mean_per_contact_frame"] = _mean_where(rms, contacts)
+    horizontal_speed = np.linalg.norm(a.feet.velocities[..., :2], axis=-1)
+    metrics["contact_foot_speed_mean"] = _mean_where(horizontal_speed, contacts)
+    metrics["skating_ratio"] = _finite_or_none(
+        skating_ratio(a.time, a.feet.positions, a.feet.heights, params)
+    )
+    metrics["contact_fraction_left"] = float(contacts[:, 0].mean())
+    metrics["contact_fraction_right"] = float(contacts[:, 1].mean())
+    metrics["double_support_fraction"] = float(contacts.all(axis=1).mean())
+    metrics["touchdowns"] = int(np.sum(~contacts[:-1] & contacts[1:]))
+    pitch = np.abs(a.feet.pitches)
+    metrics["sole_pitch_max_abs"] = float(pitch.max())
+    metrics["contact_sole_pitch_max_abs"] = float(pitch[contacts].max()) if contacts.any() else None
+    final = a.displacement[-1]
+    for name, value in zip(("x", "y", "z"), final, strict=True):
+        metrics[f"drift_{name}"] = float(value)
+    for name, value in zip(("roll", "pitch", "yaw"), a.angles[-1], strict=True):
+        metrics[f"drift_{name}"] = float(value)
+    metrics["drift_y_max_abs"] = float(np.abs(a.displacement[:, 1]).max())
+    metrics["drift_yaw_max_abs"] = float(np.abs(a.angles[:, 2]).max())
+    metrics["walks"] = bool(final[0] >= params.walk_distance)
+    return metrics
+
+
+def trajectory_time_series(
+    trajectory: Trajectory, robot: Robot | None = None, params: EvaluateParams | None = None
+) -> pd.DataFrame:
+    """Per-frame drift, foot heights, pitches, contacts and sliding, one row per frame."""
+    robot = robot or load_robot("retarget")
+    params = params or load_params().evaluate
+    a = _analyse(trajectory, robot, params)
+    columns: dict[str, np.ndarray] = {"time": a.time - a.time[0]}
+    for k, name in enumerate(("base_x", "base_y", "base_z")):
+        columns[name] = a.displacement[:, k]
+    for k, name in enumerate(("base_roll", "base_pitch", "base_yaw")):
+        columns[name] = a.angles[:, k]
+    heights, pitches = a.feet.heights, a.feet.pitches
+    rms_linear, rms_angular = a.rms_linear, a.rms_angular
+    for f, side in enumerate(SIDES):
+        columns[f"{side}_foot_height"] = heights[:, f]
+        columns[f"{side}_sole_x"] = a.feet.positions[:, f, 0]
+        columns[f"{side}_sole_y"] = a.feet.positions[:, f, 1]
+        columns[f"{side}_sole_z"] = a.feet.positions[:, f, 2]
+        columns[f"{side}_sole_pitch"] = pitches[:, f]
+        columns[f"{side}_contact"] = a.contacts[:, f]
+        columns[f"{side}_rms_linear"] = rms_linear[:, f]
+        columns[f"{side}_rms_angular"] = rms_angular[:, f]
+        columns[f"{side}_speed_xy"] = np.linalg.norm(a.feet.velocities[:, f, :2], axis=-1)
+    return pd.DataFrame(columns)
+
+
+def aggregate(
+    runs: Mapping[Any, Mapping[str, Any]] | Sequence[Mapping[str, Any]],
+) -> dict[str, dict[str, float | int | None]]:
+    """Median and spread over runs (e.g. the five seeds) of every numeric metric.
+
+    Booleans (e.g. `walks`) become 0/1, so their mean is the fraction of runs. Metrics that are
+    None in some runs are summarised over the others (`n` says how many).
+    """
+    dicts = list(runs.values()) if isinstance(runs, Mapping) else list(runs)
+    keys = [k for k in dicts[0] if isinstance(dicts[0][k], int | float | bool)] if dicts else []
+    summary: dict[str, dict[str, float | int | None]] = {}
+    for key in keys:
+        values = np.array(
+            [float(d[key]) for d in dicts if isinstance(d.get(key), int | float | bool)]
+        )
+        values = values[np.isfinite(values)]
+        if len(values) == 0:
+            summary[key] = {"n": 0}
+            continue
+        q1, median, q3 = np.percentile(values, [25, 50, 75])
+        summary[key] = {
+            "n": len(values),
+            "median": float(median),
+            "mean": float(values.mean()),
+            "q1": float(q1),
+            "q3": float(q3),
+            "iqr": float(q3 - q1),
+            "min": float(values.min()),
+            "max": float(values.max()),
+        }
+    return summary
+
+
+def metrics_for_file(
+    path: str | Path, robot: Robot | None = None, params: EvaluateParams | None = None
+) -> dict[str, Any]:
+    """`pimann metrics FILE`: the metrics of the file's trajectory, or {group: metrics} for a
+    collection file."""
+    path = Path(path)
+    is_collection = False
+    try:
+        with h5py.File(path, "r") as file:
+            is_collection = "time" not in file
+    except OSError:
+        pass  # read_trajectory raises the proper PimannError below
+    if not is_collection:
+        return trajectory_metrics(read_trajectory(path), robot, params)
+    result = {name: trajectory_metrics(t, robot, params) for name, t in iter_collection(path)}
+    if not result:
+        raise PimannError(path, "holds no trajectory")
+    return result

@@ -1,0 +1,295 @@
+"""The paper's metrics on trajectories built so that the right answer is known."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from conftest import random_configuration
+
+from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
+from pimann.errors import PimannError
+from pimann.metrics import (
+    aggregate,
+    manifold_velocities,
+    metrics_for_file,
+    trajectory_metrics,
+    trajectory_time_series,
+)
+from pimann.params import EvaluateParams
+from pimann.robot import JOINT_NAMES
+from pimann.trajectory import Trajectory, write_collection, write_trajectory
+
+PARAMS = EvaluateParams(
+    contact_on_height=0.02,
+    contact_off_height=0.02,
+    contact_switch_time=0.04,
+    skating_height=0.05,
+    skating_speed_per_frame=0.025,
+    skating_rate_hz=20.0,
+    walk_distance=1.0,
+)
+RATE = 50.0
+FRAMES = 150
+SQRT3 = np.sqrt(3.0)
+
+
+def _joint(name):
+    return JOINT_NAMES.index(name)
+
+
+def stance_trajectory(robot, slide=0.0, spin=0.0, frames=FRAMES, rate=RATE, joint_velocities=False):
+    """Left foot on the floor (sliding along its x at `slide` m/s, turning about its z at
+    `spin` rad/s), the right leg swinging high, the body moving: the base comes from the sole
+    by inverse placement, base = oMsole * (baseMsole)^-1."""
+    t = np.arange(frames) / rate
+    _, _, standing = robot.split_configuration(robot.standing_configuration())
+    phase = 2 * np.pi * 1.0 * t
+    offsets = np.zeros((frames, len(JOINT_NAMES)))
+    d_offsets = np.zeros_like(offsets)
+    moves = {  # joint: (mean, amplitude) of a 1 Hz sine
+        "l_hip_pitch": (0.0, 0.15),
+        "l_knee": (-0.2, 0.15),
+        "l_ankle_pitch": (0.0, 0.1),
+        "l_hip_roll": (0.0, 0.05),
+        "r_hip_pitch": (-0.5, 0.2),
+        "r_knee": (-0.8, 0.2),
+        "torso_pitch": (0.0, 0.1),
+        "l_shoulder_pitch": (0.0, 0.3),
+    }
+    for name, (mean, amplitude) in moves.items():
+        offsets[:, _joint(name)] = mean + amplitude * np.sin(phase)
+        d_offsets[:, _joint(name)] = amplitude * 2 * np.pi * np.cos(phase)
+    joints = standing + offsets
+    sole_rotation0 = pin.utils.rotate("z", 0.4)
+    base_positions, quaternions = [], []
+    identity = np.array([0.0, 0.0, 0.0, 1.0])
+    left = robot.frame_id(FEET[0])
+    for k in range(frames):
+        q_local = robot.configuration(np.zeros(3), identity, joints[k])
+        base_M_sole = robot.frame_placement(q_local, FEET[0])
+        world_M_sole = pin.SE3(
+            sole_rotation0 @ pin.utils.rotate("z", spin * t[k]),
+            np.array([0.3, -0.2, 0.0]) + sole_rotation0[:, 0] * slide * t[k],
+        )
+        world_M_base = world_M_sole * base_M_sole.inverse()
+        base_positions.append(world_M_base.translation)
+        quaternions.append(pin.Quaternion(world_M_base.rotation).coeffs())
+    assert left >= 0
+    return Trajectory(
+        time=t,
+        base_position=np.array(base_positions),
+        base_quaternion_xyzw=np.array(quaternions),
+        joint_positions=joints,
+        source="stance",
+        rate_hz=rate,
+        joint_velocities=d_offsets if joint_velocities else None,
+    )
+
+
+def line_trajectory(robot, heading=0.5, distance=1.5, lateral=0.0, turn=0.0, frames=100):
+    """The standing robot translated along its heading (plus a lateral offset and a turn)."""
+    q = robot.standing_configuration()
+    _, quaternion, joints = robot.split_configuration(q)
+    s = np.linspace(0.0, 1.0, frames)
+    forward = np.array([np.cos(heading), np.sin(heading), 0.0])
+    left = np.array([-np.sin(heading), np.cos(heading), 0.0])
+    positions = q[:3] + s[:, None] * (distance * forward + lateral * left)
+    start = pin.Quaternion(quaternion).matrix()
+    quaternions = [
+        pin.Quaternion(pin.utils.rotate("z", heading + turn * sk) @ start).coeffs() for sk in s
+    ]
+    return Trajectory(
+        time=s * 10.0,
+        base_position=positions,
+        base_quaternion_xyzw=np.array(quaternions),
+        joint_positions=np.tile(joints, (frames, 1)),
+        source="line",
+        rate_hz=(frames - 1) / 10.0,
+    )
+
+
+def test_still_support_foot_has_zero_rmse(robot):
+    metrics = trajectory_metrics(stance_trajectory(robot), robot, PARAMS)
+    assert metrics["contacts_source"] == "detected"
+    # the left foot is in contact throughout, the right one never
+    assert metrics["contact_fraction_left"] == 1.0 and metrics["contact_fraction_right"] == 0.0
+    # finite-difference error only (~1e-4 m/s a frame at 50 Hz; 1 cm/s of sliding sums to 0.87)
+    assert metrics["support_rmse_linear_left"] < 0.02
+    assert metrics["support_rmse_angular_left"] < 0.02
+    assert metrics["support_rmse_linear_mean_per_contact_frame"] < 2e-4
+    assert metrics["support_rmse_linear_right"] == 0.0
+    assert metrics["skating_ratio"] == 0.0
+    assert metrics["contact_foot_speed_mean"] < 1e-4
+    # the body did move: the base is not still
+    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS)
+    assert np.ptp(series["base_x"]) > 0.03 and series["right_foot_height"].min() > 0.05
+
+
+def test_rmse_grows_with_injected_sliding(robot):
+    speeds = [0.0, 0.01, 0.05, 0.2]
+    totals = []
+    for speed in speeds:
+        metrics = trajectory_metrics(stance_trajectory(robot, slide=speed), robot, PARAMS)
+        # a rigid slide at `speed` along the sole's x: RMS over 3 components = speed / sqrt(3)
+        expected = FRAMES * speed / SQRT3
+        assert metrics["support_rmse_linear_left"] == pytest.approx(expected, abs=0.02)
+        assert metrics["support_rmse_linear_total"] == pytest.approx(expected / 2, abs=0.01)
+        assert metrics["support_rmse_angular_left"] < 0.02
+        assert metrics["contact_foot_speed_mean"] == pytest.approx(speed, abs=1e-4)
+        totals.append(metrics["support_rmse_linear_total"])
+    assert np.all(np.diff(totals) > 0)
+
+
+def test_turning_foot_counts_in_angular_rmse(robot):
+    spin = 0.5  # rad/s about the sole's z: the sole origin stays put
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS)
+    assert metrics["support_rmse_angular_left"] == pytest.approx(FRAMES * spin / SQRT3, rel=1e-3)
+    assert metrics["support_rmse_linear_left"] < 0.05  # vs 43 rad/s-frames of turning
+
+
+def test_still_foot_residual_is_second_order_in_the_frame_period(robot):
+    """What remains for a still foot is finite-difference error: doubling the rate quarters it."""
+    residuals = []
+    for rate in (50.0, 100.0):
+        trajectory = stance_trajectory(robot, frames=int(2 * rate), rate=rate)
+        series = trajectory_time_series(trajectory, robot, PARAMS)
+        residuals.append(series[["left_rms_linear", "left_rms_angular"]].to_numpy().max(axis=0))
+    assert np.all(residuals[1] < 0.3 * residuals[0])
+
+
+def test_file_joint_velocities_and_contacts_are_used(robot):
+    trajectory = stance_trajectory(robot, slide=0.05, joint_velocities=True)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    assert metrics["joint_velocities_source"] == "file"
+    assert metrics["support_rmse_linear_left"] == pytest.approx(FRAMES * 0.05 / SQRT3, abs=2e-2)
+    trajectory.contacts = np.zeros((FRAMES, 2), dtype=bool)  # nothing in contact: nothing counts
+    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    assert metrics["contacts_source"] == "file"
+    assert metrics["support_rmse_linear_total"] == 0.0
+    assert metrics["contact_foot_speed_mean"] is None
+
+
+def test_skating_ratio_threshold(robot):
+    # 2.5 cm per frame at 20 fps is 0.5 m/s
+    below = trajectory_metrics(stance_trajectory(robot, slide=0.4), robot, PARAMS)
+    above = trajectory_metrics(stance_trajectory(robot, slide=0.6), robot, PARAMS)
+    assert below["skating_ratio"] == 0.0
+    assert above["skating_ratio"] == pytest.approx(1.0)  # the low left foot skates throughout
+
+
+def test_frame_velocity_matches_differences_of_the_sole_placement(robot, rng):
+    """getFrameVelocity (LOCAL_WORLD_ALIGNED) with v from manifold differences of q agrees with
+    differences of the sole placement itself (log6 of successive placements)."""
+    rate, frames = 1000.0, 41
+    t = np.arange(frames) / rate
+    q0 = random_configuration(robot, rng)
+    direction = rng.normal(size=robot.model.nv)
+    configurations = np.array([pin.integrate(robot.model, q0, direction * np.sin(tk)) for tk in t])
+    velocities = manifold_velocities(robot.model, configurations, t)
+    feet = foot_kinematics(robot, configurations, velocities)
+    k = frames // 2
+    for f, frame in enumerate(FEET):
+        before, now, after = (
+            robot.frame_placement(configurations[j], frame) for j in (k - 1, k, k + 1)
+        )
+        local = (
+            pin.log6(now.inverse() * after).vector - pin.log6(now.inverse() * before).vector
+        ) * (rate / 2)
+        world = np.r_[now.rotation @ local[:3], now.rotation @ local[3:]]
+        np.testing.assert_allclose(feet.velocities[k, f], world, atol=1e-5 * np.abs(world).max())
+        # and J(q) v with the Jacobian in the same representation
+        jacobian = robot.frame_jacobian(configurations[k], frame, pin.LOCAL_WORLD_ALIGNED)
+        v_study = velocities[k][robot.velocity_order]
+        np.testing.assert_allclose(feet.velocities[k, f], jacobian @ v_study, atol=1e-10)
+
+
+def test_manifold_velocities_of_an_uneven_clock(robot, rng):
+    """Central differences on an uneven time grid recover a constant velocity exactly."""
+    q0 = random_configuration(robot, rng)
+    v = np.zeros(robot.model.nv)
+    v[6:] = rng.normal(size=robot.model.nv - 6)
+    v[:6] = rng.normal(size=6)
+    t = np.cumsum(rng.uniform(0.01, 0.03, size=20))
+    configurations = np.array([pin.integrate(robot.model, q0, v * tk) for tk in t])
+    np.testing.assert_allclose(
+        manifold_velocities(robot.model, configurations, t), np.tile(v, (20, 1)), atol=1e-9
+    )
+
+
+def test_drift_of_a_straight_line_is_zero(robot):
+    metrics = trajectory_metrics(line_trajectory(robot), robot, PARAMS)
+    assert metrics["drift_x"] == pytest.approx(1.5)
+    assert metrics["drift_y"] == pytest.approx(0.0, abs=1e-12)
+    assert metrics["drift_yaw"] == pytest.approx(0.0, abs=1e-12)
+    assert metrics["walks"] is True
+    assert trajectory_metrics(line_trajectory(robot, distance=0.5), robot, PARAMS)["walks"] is False
+
+
+def test_drift_of_a_known_offset_and_turn(robot):
+    trajectory = line_trajectory(robot, heading=2.8, lateral=-0.3, turn=4.0)  # past +-pi
+    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    assert metrics["drift_y"] == pytest.approx(-0.3)
+    assert metrics["drift_yaw"] == pytest.approx(4.0)  # unwrapped
+    assert metrics["drift_roll"] == pytest.approx(0.0, abs=1e-9)
+    series = trajectory_time_series(trajectory, robot, PARAMS)
+    np.testing.assert_allclose(series["base_y"], np.linspace(0, -0.3, len(series)), atol=1e-12)
+    assert series["base_yaw"].is_monotonic_increasing
+
+
+def test_time_series_columns(robot):
+    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS)
+    assert len(series) == FRAMES and series["time"].iloc[0] == 0.0
+    for column in ["base_x", "base_yaw", "left_foot_height", "right_sole_pitch", "left_contact"]:
+        assert column in series
+    assert series["left_contact"].all() and not series["right_contact"].any()
+
+
+def test_aggregate_over_seeds():
+    runs = {
+        seed: {"rmse": value, "walks": value > 2, "source": "x", "maybe": None if seed == 0 else 1}
+        for seed, value in enumerate([1.0, 2.0, 3.0, 4.0, 10.0])
+    }
+    summary = aggregate(runs)
+    assert "source" not in summary
+    assert summary["rmse"]["median"] == 3.0 and summary["rmse"]["mean"] == 4.0
+    assert summary["rmse"]["iqr"] == pytest.approx(
+        np.subtract(*np.percentile([1, 2, 3, 4, 10], [75, 25]))
+    )
+    assert summary["rmse"]["min"] == 1.0 and summary["rmse"]["max"] == 10.0
+    assert summary["walks"]["mean"] == pytest.approx(0.6)
+    assert aggregate(list(runs.values())) == summary
+
+
+def test_metrics_for_file_and_collection(robot, tmp_path):
+    single = tmp_path / "one.h5"
+    write_trajectory(single, line_trajectory(robot))
+    metrics = metrics_for_file(single, robot, PARAMS)
+    json.dumps(metrics)  # serialisable
+    assert metrics["drift_x"] == pytest.approx(1.5)
+    collection = tmp_path / "many.h5"
+    write_collection(collection, [("a", line_trajectory(robot)), ("b", stance_trajectory(robot))])
+    both = metrics_for_file(collection, robot, PARAMS)
+    assert set(both) == {"a", "b"} and both["b"]["contact_fraction_left"] == 1.0
+    with pytest.raises(PimannError, match="not found"):
+        metrics_for_file(tmp_path / "missing.h5", robot, PARAMS)
+
+
+def test_bad_time_is_named(robot):
+    trajectory = line_trajectory(robot)
+    trajectory.time[5] = trajectory.time[4]
+    with pytest.raises(PimannError, match=r"frame 5.*not strictly increasing"):
+        trajectory_metrics(trajectory, robot, PARAMS)
+
+
+def test_configurations_match_robot_configuration(robot):
+    trajectory = line_trajectory(robot, frames=3)
+    q = trajectory_configurations(robot, trajectory)
+    expected = robot.configuration(
+        trajectory.base_position[1],
+        trajectory.base_quaternion_xyzw[1],
+        trajectory.joint_positions[1],
+    )
+    np.testing.assert_allclose(q[1], expected)
