@@ -17,6 +17,13 @@ class PimannError(Exception):
             where += f" (frame {frame})"
         super().__init__(f"{where}: {problem}")
 
+    def __reduce__(self):  # keeps the error intact across process pools
+        return (_rebuild_error, (self.path, self.problem, self.frame))
+
+
+def _rebuild_error(path: str | None, problem: str, frame: int | None) -> PimannError:
+    return PimannError(path, problem, frame=frame)
+
 
 def require_finite(path: str | Path, name: str, values, *, frame_axis: int = 0) -> None:
     """Raise naming the first frame of `values` that holds a NaN or an infinity."""

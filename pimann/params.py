@@ -48,12 +48,17 @@ class RetargetParams:
     pelvis_gain: float
     segment_gain: float
     segment_weight: float
+    trunk_weight: float
     gain_time_step: float
     posture_cost: float
     iterations_per_frame: int
     solver: str
     flat_feet: bool
+    hold_stance_heading: bool
+    stance_foot_weight: float
+    double_support_weight: float
     head_from_t8: bool
+    elbow_hinge: bool
     min_leg_roll_spread: float
     min_shoulder_roll: float
     min_foot_spacing: float
@@ -108,8 +113,27 @@ class TrainParams:
     restart_period: int  # epochs of the first cosine cycle (Te)
     restart_mult: int  # each cycle this many times longer (Tmult)
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
+    max_train_samples: int | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]
+
+
+@dataclasses.dataclass(frozen=True)
+class MotionSegment:
+    """One command of a rollout scenario: body-frame (heading) velocity and yaw rate."""
+
+    duration: float  # s
+    vx: float  # m/s, forward
+    vy: float  # m/s, left
+    yaw_rate: float  # rad/s, counter-clockwise
+
+
+@dataclasses.dataclass(frozen=True)
+class StandSegment:
+    """A 'stand' command: stop at the goal (steering) or at once, then hold the standing pose."""
+
+    duration: float  # s
+    stand: Literal[True]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -120,6 +144,14 @@ class RolloutParams:
     k1: float  # 1/s, steering orientation gain (Eq. rot_pid)
     goal_factor: float  # goal = this x the commanded displacement ahead
     goal_radius: float  # m, stop within this horizontal distance of the goal
+    command_blend_tau: float  # future input = (1 - w) prediction + w command, w = (t/T)^tau
+    stop_blend_s: float  # s over which the joints return to the standing pose on a stop
+    stop_timeout_s: float  # s after 'stand' that a steered stop happens even off the goal
+    planar_steering: bool  # authors' code: horizontal position error in the yaw frame only
+    held_command: Literal["progress", "carrot"]  # how the goal moves while a command holds
+    pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
+    scenarios: dict[str, list[MotionSegment | StandSegment]]
+    scenario_names: list[str]  # the scenarios the DVC rollout stage generates
 
 
 @dataclasses.dataclass(frozen=True)
@@ -149,7 +181,9 @@ class SimulateParams:
     friction: float
     speed_scale: float  # the trajectory's time runs this much slower on the robot (0.33x)
     step_scale: float  # footstep displacements scaled by this (0.4x)
-    min_phase_s: float  # contact phases shorter than this (after scaling) are merged
+    min_phase_s: float  # contacts shorter than this (robot time) are dropped
+    min_swing_s: float  # swings shorter than this (robot time) are dropped: the foot stays
+    min_double_s: float  # s, least double support at every touchdown (taken from the swings)
     swing_height: float  # m
     com_height: float  # m, LIPM height and IK CoM height
     zmp_hold_s: float  # s of double support before the first step
@@ -173,7 +207,18 @@ class SimulateParams:
 
 @dataclasses.dataclass(frozen=True)
 class FiguresParams:
-    """figures (issue 4)."""
+    """figures: what evaluate selects for the paper's figures and claims, and the style."""
+
+    scenario: str  # rollout scenario of the paper's test (10 s forward walking)
+    pi_weight: float  # the PI model of the drift figures and the steering claims
+    box_weights: list[float]  # weights in the RMSE box plots and the "all w" claims
+    large_weight: float  # the weight said to fail unsteered and to pitch the feet
+    foot_height_weights: list[float]  # the two models of the foot-height figure
+    foot_steering: bool  # foot figures and claims from steered (True) or unsteered rollouts
+    drift_reduction: float  # steering "removes" drift when it cuts the median by this factor
+    width_in: float  # figure width, inches
+    font_pt: float
+    dpi: int  # PNG resolution
 
 
 @dataclasses.dataclass(frozen=True)

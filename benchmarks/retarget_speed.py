@@ -1,0 +1,78 @@
+"""How fast retargeting runs, and how long the whole walking set would take.
+
+Goal (issue 2): the whole walking set (720 clips, ~73 min at 30 fps; originals, whose
+mirrors are exact joint-space copies) retargets in under 10 minutes on 2 cores.
+Run with `nice -n 10 python benchmarks/retarget_speed.py [--clips N]`; it prints output
+frames (at retarget.rate_hz) per second, per core (wall and CPU time) and with the pool,
+and the projected whole-set time (from the pool's wall time, and from CPU time, which is
+what two free cores would do when the machine is shared).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import functools
+import re
+import time
+from multiprocessing import Pool
+
+from pimann.mocap.clips import select_clips
+from pimann.params import load_params
+from pimann.retarget import retarget_clip
+
+GOAL_S = 600.0  # s
+
+
+def bvh_seconds(path) -> float:
+    """Clip duration from the BVH header, without parsing the motion."""
+    with open(path) as file:
+        head = file.read(20000)
+    frames = int(re.search(r"Frames:\s*(\d+)", head).group(1))
+    frame_time = float(re.search(r"Frame Time:\s*([0-9.eE+-]+)", head).group(1))
+    return (frames - 1) * frame_time
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--clips", type=int, default=12, help="clips to time (spread)")
+    args = parser.parse_args()
+    params = load_params()
+    everything = select_clips(dataclasses.replace(params.data, max_clips=None))
+    sample = select_clips(dataclasses.replace(params.data, max_clips=args.clips))
+    rate = params.retarget.rate_hz
+    total_frames = sum(int(bvh_seconds(c.path) * rate) + 1 for c in everything)
+    work = functools.partial(retarget_clip, params=params)
+    work(sample[0].path)  # warm-up: model loading, imports
+
+    start, cpu_start = time.perf_counter(), time.process_time()
+    results = [work(c.path) for c in sample]
+    serial, cpu = time.perf_counter() - start, time.process_time() - cpu_start
+    frames = sum(len(r[1]) for r in results)
+    ik_seconds = sum(r[3] for r in results)
+
+    workers = params.retarget.workers
+    start = time.perf_counter()
+    with Pool(workers) as pool:
+        pool.map(work, [c.path for c in sample])
+    pooled = time.perf_counter() - start
+
+    per_core = frames / serial
+    with_pool = frames / pooled
+    projected = total_frames / with_pool
+    print(f"timed clips: {len(sample)}, frames at {rate:g} Hz: {frames}")
+    print(f"retargeting alone (IK + odometry): {1000 * ik_seconds / frames:.2f} ms/frame")
+    print(f"per core (retarget + quality):  {per_core:8.1f} frames/s ({1000 / per_core:.2f} ms)")
+    cpu_ms = 1000 * cpu / frames
+    print(f"per core, CPU time:             {frames / cpu:8.1f} frames/s ({cpu_ms:.2f} ms)")
+    print(f"pool of {workers} workers:          {with_pool:8.1f} frames/s")
+    minutes = total_frames / rate / 60
+    print(f"whole set: {len(everything)} clips, {total_frames} frames ({minutes:.1f} min)")
+    print(f"projected whole-set time: {projected:.0f} s ({projected / GOAL_S:.2f} x the goal)")
+    # the machine may be shared: CPU time tells what free cores would do
+    free = total_frames * cpu / frames / workers
+    print(f"projected on {workers} free cores (CPU time): {free:.0f} s ({free / GOAL_S:.2f} x)")
+
+
+if __name__ == "__main__":
+    main()

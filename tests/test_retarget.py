@@ -1,0 +1,155 @@
+"""Retargeting: IK recovers poses made by the robot's own kinematics; odometry keeps feet still."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from pimann.mocap.bvh import read_bvh
+from pimann.mocap.human_motion import HumanMotion
+from pimann.mocap.resample import resample
+from pimann.params import load_params
+from pimann.paths import mocap_dir
+from pimann.retarget import retarget_motion
+from pimann.retarget.ik import RetargetIK
+from pimann.retarget.odometry import odometry_base_positions
+from pimann.retarget.quality import frame_measures, summarize
+from pimann.robot import SEGMENTS, STANDING_JOINTS
+
+REAL_CLIP = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params()
+
+
+def test_ik_recovers_joints_of_a_forward_kinematics_pose(robot, rng, params):
+    # the inequalities (leg spread, feet spacing, shoulder roll) are off: a random pose may
+    # break them; a tiny posture cost keeps the optimum at the exact pose
+    ik_params = dataclasses.replace(
+        params.retarget,
+        posture_cost=1e-8,
+        min_leg_roll_spread=-10.0,
+        min_shoulder_roll=-10.0,
+        min_foot_spacing=-10.0,
+        gain_time_step=1.0 / params.retarget.segment_gain,
+    )
+    margin = 0.05
+    joints = np.clip(
+        STANDING_JOINTS + rng.uniform(-0.3, 0.3, size=len(STANDING_JOINTS)),
+        robot.joint_lower + margin,
+        robot.joint_upper - margin,
+    )
+    quaternion = pin.Quaternion(pin.rpy.rpyToMatrix(0.1, -0.05, 0.7)).coeffs()
+    q_true = robot.configuration([0.3, -0.2, 0.8], quaternion, joints)
+    targets = [robot.frame_placement(q_true, f"data_{s}") for s in SEGMENTS]
+    ik = RetargetIK(robot, ik_params, rate_hz=50.0)
+    for _ in range(40):
+        q = ik.solve(targets[0], np.array([t.rotation for t in targets[1:]]))
+    base_position, base_quaternion, solved = robot.split_configuration(q)
+    np.testing.assert_allclose(solved, joints, atol=1e-4)
+    np.testing.assert_allclose(base_position, [0.3, -0.2, 0.8], atol=1e-6)
+    assert abs(abs(base_quaternion @ quaternion) - 1.0) < 1e-9
+    for segment, target in zip(SEGMENTS, targets, strict=True):
+        placement = robot.frame_placement(q, f"data_{segment}")
+        error = pin.log3(placement.rotation.T @ target.rotation)
+        assert np.linalg.norm(error) < 1e-5, segment
+
+
+def test_ik_keeps_the_inequalities(robot, params):
+    """Legs pressed together by the targets: the feet stay min_foot_spacing apart."""
+    ik = RetargetIK(robot, params.retarget, rate_hz=50.0)
+    q_standing = robot.standing_configuration()
+    targets = [robot.frame_placement(q_standing, f"data_{s}").rotation for s in SEGMENTS]
+    inward = pin.rpy.rpyToMatrix(0.3, 0.0, 0.0)  # left leg rolled toward the right and back
+    for k, segment in enumerate(SEGMENTS):
+        if segment.startswith("Left") and "Leg" in segment:
+            targets[k] = inward.T @ targets[k]
+        if segment.startswith("Right") and "Leg" in segment:
+            targets[k] = inward @ targets[k]
+    pelvis = robot.frame_placement(q_standing, "data_Pelvis")
+    for _ in range(30):
+        q = ik.solve(pelvis, np.array(targets[1:]))
+    left = robot.frame_placement(q, "l_sole").translation
+    right = robot.frame_placement(q, "r_sole").translation
+    base = robot.frame_placement(q, "root_link")
+    spacing = base.rotation[:, 1] @ (left - right)
+    assert spacing >= params.retarget.min_foot_spacing - 1e-6
+    assert spacing < 0.15  # the targets did press the feet together
+    _, _, joints = robot.split_configuration(q)
+    assert np.all(joints >= robot.joint_lower - 1e-9) and np.all(joints <= robot.joint_upper + 1e-9)
+
+
+def test_odometry_closed_form():
+    """Foot offsets from a base moving at 1 m/s: an anchored foot pins the base."""
+    n = 6
+    offsets = np.zeros((n, 2, 3))
+    offsets[:, 0] = [[0.2 - 0.05 * t, 0.1, -0.7] for t in range(n)]  # left foot drifts back
+    offsets[:, 1] = [[-0.2 + 0.05 * t, -0.1, -0.7] for t in range(n)]
+    contacts = np.array([[1, 0], [1, 0], [1, 1], [0, 1], [0, 1], [0, 0]], bool)
+    fallback = np.array([[0.02 * t, 0.0, 0.9] for t in range(n)])
+    lowest = np.minimum(offsets[:, 0, 2], offsets[:, 1, 2]) - 0.01 * np.arange(n)
+    base = odometry_base_positions(offsets, contacts, fallback, lowest)
+    left_world = base + offsets[:, 0]
+    right_world = base + offsets[:, 1]
+    np.testing.assert_allclose(left_world[:3, :2], np.tile([0.2, 0.1], (3, 1)), atol=1e-12)
+    np.testing.assert_allclose(right_world[2:5, :2], np.tile(right_world[2, :2], (3, 1)))
+    # height: the lowest corner touches the floor
+    np.testing.assert_allclose(base[:, 2], 0.7 + 0.01 * np.arange(n), atol=1e-12)
+    # no contact: the base moves like the fallback
+    np.testing.assert_allclose(base[5, :2] - base[4, :2], [0.02, 0.0], atol=1e-12)
+
+
+@pytest.fixture(scope="module")
+def short_clip(params) -> HumanMotion:
+    skeleton = params.data.skeletons[params.data.skeleton]
+    motion = read_bvh(mocap_dir() / "bandai-namco/dataset" / REAL_CLIP, skeleton)
+    keep = slice(0, 75)  # 2.5 s: a couple of steps
+    return HumanMotion(
+        motion.time[keep], motion.orientations[keep], motion.segment_positions[keep], "short"
+    )
+
+
+def test_retarget_keeps_the_stance_foot_still(short_clip, params):
+    trajectory = retarget_motion(short_clip, params.retarget)
+    assert trajectory.rate_hz == params.retarget.rate_hz
+    assert np.allclose(np.diff(trajectory.time), 1.0 / params.retarget.rate_hz)
+    assert trajectory.contacts.any(axis=0).all()  # both feet touch down
+    measures = frame_measures(
+        resample(short_clip, params.retarget.rate_hz), trajectory, params.retarget
+    )
+    quality = summarize([measures])
+    assert quality["stance_foot_speed_m_s"]["median"] < 0.02
+    assert quality["stance_foot_speed_m_s"]["p95"] < 0.05
+    assert quality["orientation_error_deg"]["Head"]["median"] < 1.0
+    assert quality["orientation_error_deg"]["LeftLowerLeg"]["median"] < 10.0
+    # the robot walks forward, with shorter steps than the person
+    assert 0.5 < quality["speed_ratio"] < 0.95
+    assert trajectory.base_position[-1, 0] - trajectory.base_position[0, 0] > 1.0
+
+
+def test_planted_foot_keeps_its_touchdown_heading():
+    from pimann.retarget.targets import hold_during_contact
+
+    yaw = np.linspace(0.0, 0.9, 10)
+    contact = np.array([0, 1, 1, 1, 0, 0, 1, 1, 0, 1], bool)
+    held = hold_during_contact(yaw, contact)
+    np.testing.assert_allclose(held, [0.0, 0.1, 0.1, 0.1, 0.4, 0.5, 0.6, 0.6, 0.8, 0.9])
+
+
+def test_retarget_file_and_its_mirror(params):
+    from pimann.retarget import retarget_file
+
+    path = mocap_dir() / "bandai-namco/dataset" / REAL_CLIP
+    original = retarget_file(path, params)
+    mirrored = retarget_file(path, params, mirror=True)
+    assert original.source == "dataset-1_walk_normal_001.bvh"
+    assert original.attrs["mirrored"] is False and mirrored.attrs["mirrored"] is True
+    np.testing.assert_allclose(mirrored.base_position[:, 1], -original.base_position[:, 1])
+    np.testing.assert_array_equal(mirrored.contacts, original.contacts[:, ::-1])
+    # 195 frames at 30 fps = 6.47 s, at 50 Hz
+    assert len(original) == 324
