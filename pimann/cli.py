@@ -62,6 +62,15 @@ def cmd_render(args: argparse.Namespace) -> None:
     render_file(args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton)
 
 
+def cmd_generate(args: argparse.Namespace) -> None:
+    from pimann.generate import generate_file
+
+    params = _params(args)
+    generate_file(
+        args.model_dir, args.scenario, args.output, not args.no_steering, params, args.params
+    )
+
+
 def cmd_metrics(args: argparse.Namespace) -> None:
     from pimann.metrics import trajectory_metrics
     from pimann.robot import load_robot
@@ -101,6 +110,14 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--group", help="clip group inside a collection file")
     render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
     render.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+
+    generate = add("generate", cmd_generate, "roll a trained model out on one scenario")
+    generate.add_argument("model_dir", type=Path)
+    generate.add_argument(
+        "--scenario", required=True, help="a name in params.yaml rollout.scenarios"
+    )
+    generate.add_argument("-o", "--output", type=Path, required=True)
+    generate.add_argument("--no-steering", action="store_true", help="no control-informed steering")
 
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path)

@@ -1,0 +1,65 @@
+"""Training speed: seconds per optimiser step of a full-size MANN ensemble, with and without L_B.
+
+Prints the time per step and per 1000 training samples (batch 32) for an ensemble of
+`--members` seeds, so one full model (150 epochs) can be estimated from the sample count:
+hours = 150 * samples / 1000 * (seconds per 1000 samples) / 3600.
+
+    python benchmarks/train_speed.py [--device cuda] [--members 5] [--steps 30]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from pimann.features import Normalisation, window_layout
+from pimann.mann import MANN
+from pimann.params import load_params
+from pimann.train import TrainingLoss, pick_device
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--device", default="auto")
+    parser.add_argument("--members", type=int, default=5)
+    parser.add_argument("--steps", type=int, default=30)
+    args = parser.parse_args()
+    params = load_params()
+    device = pick_device(args.device)
+    layout = window_layout(params.features, 50.0, "full")
+    rng = np.random.default_rng(0)
+    raw_y = rng.normal(size=(1000, layout.output_dim)) * 0.1
+    stats = Normalisation.fit(rng.normal(size=(1000, layout.input_dim)), raw_y)
+    loss_fn = TrainingLoss(layout, stats, "predicted", device)
+    batch = params.train.batch_size
+    seeds = list(range(args.members))
+    x = torch.randn(args.members, batch, layout.input_dim, device=device)
+    y = torch.randn(args.members, batch, layout.output_dim, device=device)
+    for weight in (0.0, 10.0):
+        model = MANN.from_seeds(layout.input_dim, layout.output_dim, params.model, seeds)
+        model.to(device).train()
+        optimizer = torch.optim.AdamW(model.parameters(), lr=1e-4)
+        for step in range(args.steps + 3):
+            if step == 3:  # warm-up excluded
+                if device.type == "cuda":
+                    torch.cuda.synchronize()
+                start = time.perf_counter()
+            mse, pi = loss_fn(model(x), y, weight != 0.0)
+            optimizer.zero_grad()
+            (mse + weight * pi).sum().backward()
+            optimizer.step()
+        if device.type == "cuda":
+            torch.cuda.synchronize()
+        per_step = (time.perf_counter() - start) / args.steps
+        print(
+            f"{device.type} w={weight:g} members={args.members} batch={batch}: "
+            f"{per_step * 1e3:.1f} ms/step, {per_step * 1000 / batch:.2f} s per 1000 samples "
+            f"(all {args.members} members), threads={torch.get_num_threads()}"
+        )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,393 @@
+"""Training features (SPEC 4, paper Eqs. nn_input and nn_output) and the leak-free split.
+
+Step i of a clip gives one sample. The input x_i holds the base linear and angular velocities
+at the input window's offsets around i, each rotated into the base frame at i (the window
+centre), then s_{i-1}, sdot_{i-1}, p_{i-1}, psi_{i-1}; the output y_i holds the velocities at
+the output window's offsets from i (base frame at i), then s_i, sdot_i, p_i, psi_i. Both
+windows come from params as seconds (the authors' and the paper's differ only there), so one
+function serves both. Velocities are finite differences at the data rate; psi are Tait-Bryan
+angles in pinocchio's convention (R = Rz(yaw) Ry(pitch) Rx(roll)), yaw unwrapped along a clip
+so that it is continuous. Steps whose windows leave the clip are dropped.
+
+The `ground_projected` variant (the ADHERENT baseline) replaces the base orientation by its
+yaw alone (roll and pitch 0) before anything is computed; the base position, z included, is
+kept, so the layout is the same as `full` and the rollout can reuse it. Its base velocities
+are those of that projected frame (angular velocity about z only).
+
+The split is by source clip: a clip and its mirror (same `source` attribute) land on the same
+side, so no motion is seen in training and tested mirrored. Z-score statistics come from the
+training samples only.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import h5py
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pimann.atomic import atomic_path
+from pimann.errors import PimannError
+from pimann.params import FeaturesParams
+from pimann.robot import N_JOINTS
+from pimann.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
+
+VARIANTS = ("full", "ground_projected")
+MIN_STD = 1e-8  # a constant feature (e.g. roll of the ground-projected base) keeps std 1
+
+
+@dataclasses.dataclass(frozen=True)
+class FeatureLayout:
+    """Where each quantity sits in x and y; the windows' offsets are in frames at `rate_hz`.
+
+    Window blocks are (samples, 3) row-major: sample k's x, y, z are columns 3k..3k+2.
+    """
+
+    input_offsets: tuple[int, ...]
+    output_offsets: tuple[int, ...]
+    rate_hz: float
+    variant: str
+    n_joints: int = N_JOINTS
+
+    def _blocks(self, window: str, n: int) -> list[tuple[str, int]]:
+        return [
+            (f"base_linear_{window}", 3 * n),
+            (f"base_angular_{window}", 3 * n),
+            ("joints", self.n_joints),
+            ("joint_velocities", self.n_joints),
+            ("base_position", 3),
+            ("base_rpy", 3),
+        ]
+
+    @staticmethod
+    def _slices(blocks: list[tuple[str, int]]) -> dict[str, slice]:
+        ends = np.cumsum([width for _, width in blocks])
+        return {name: slice(int(e - w), int(e)) for (name, w), e in zip(blocks, ends, strict=True)}
+
+    @property
+    def x_slices(self) -> dict[str, slice]:
+        """input: base_linear_window, base_angular_window, joints, ... (state at i-1)."""
+        return self._slices(self._blocks("window", len(self.input_offsets)))
+
+    @property
+    def y_slices(self) -> dict[str, slice]:
+        """output: base_linear_future, base_angular_future, joints, ... (state at i)."""
+        return self._slices(self._blocks("future", len(self.output_offsets)))
+
+    @property
+    def input_dim(self) -> int:
+        return next(reversed(self.x_slices.values())).stop
+
+    @property
+    def output_dim(self) -> int:
+        return next(reversed(self.y_slices.values())).stop
+
+    @property
+    def current_output(self) -> int:
+        """Index of offset 0 in the output window: the base velocity at step i itself."""
+        if 0 not in self.output_offsets:
+            raise PimannError(None, "the output window has no sample at offset 0")
+        return self.output_offsets.index(0)
+
+    def names(self, which: str) -> list[str]:
+        """One name per column of x (`which="x"`) or y, e.g. `base_linear_window[-50].x`."""
+        offsets = self.input_offsets if which == "x" else self.output_offsets
+        slices = self.x_slices if which == "x" else self.y_slices
+        names = []
+        for block, part in slices.items():
+            if block.startswith("base_") and block.endswith(("window", "future")):
+                names += [f"{block}[{o}].{a}" for o in offsets for a in "xyz"]
+            elif block == "base_rpy":
+                names += [f"base_rpy.{a}" for a in ("roll", "pitch", "yaw")]
+            else:
+                names += [f"{block}.{k}" for k in range(part.stop - part.start)]
+        return names
+
+    def to_json(self) -> str:
+        return json.dumps(dataclasses.asdict(self))
+
+    @classmethod
+    def from_json(cls, text: str) -> FeatureLayout:
+        raw = json.loads(text)
+        raw["input_offsets"] = tuple(raw["input_offsets"])
+        raw["output_offsets"] = tuple(raw["output_offsets"])
+        return cls(**raw)
+
+
+@dataclasses.dataclass(frozen=True)
+class Normalisation:
+    """Z-score statistics of the training samples; works on numpy arrays and torch tensors."""
+
+    x_mean: np.ndarray
+    x_std: np.ndarray
+    y_mean: np.ndarray
+    y_std: np.ndarray
+
+    @classmethod
+    def fit(cls, x: np.ndarray, y: np.ndarray) -> Normalisation:
+        def std(values: np.ndarray) -> np.ndarray:
+            s = values.std(axis=0)
+            return np.where(s < MIN_STD, 1.0, s)
+
+        return cls(x.mean(axis=0), std(x), y.mean(axis=0), std(y))
+
+    def normalise_x(self, x):
+        return (x - _like(self.x_mean, x)) / _like(self.x_std, x)
+
+    def normalise_y(self, y):
+        return (y - _like(self.y_mean, y)) / _like(self.y_std, y)
+
+    def denormalise_x(self, x):
+        return x * _like(self.x_std, x) + _like(self.x_mean, x)
+
+    def denormalise_y(self, y):
+        return y * _like(self.y_std, y) + _like(self.y_mean, y)
+
+
+def _like(values: np.ndarray, reference):
+    """`values` as the same kind (numpy or torch, dtype, device) as `reference`."""
+    if isinstance(reference, np.ndarray):
+        return values.astype(reference.dtype, copy=False)
+    return reference.new_tensor(values)
+
+
+def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> FeatureLayout:
+    """The layout for the window named by `params.window`, offsets rounded to frames."""
+    if params.window not in params.windows:
+        raise PimannError(
+            None, f"features.window {params.window!r} is not one of {sorted(params.windows)}"
+        )
+    if variant not in VARIANTS:
+        raise PimannError(None, f"unknown feature variant {variant!r}; known: {list(VARIANTS)}")
+    window = params.windows[params.window]
+
+    def frames(seconds: list[float]) -> tuple[int, ...]:
+        return tuple(int(round(s * rate_hz)) for s in seconds)
+
+    return FeatureLayout(frames(window.input_s), frames(window.output_s), rate_hz, variant)
+
+
+def yaw_only(rotations: np.ndarray) -> np.ndarray:
+    """Rz(yaw) of each rotation: the ground projection (roll and pitch set to 0)."""
+    yaw = np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0])
+    c, s = np.cos(yaw), np.sin(yaw)
+    out = np.zeros_like(rotations)
+    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
+    out[:, 2, 2] = 1.0
+    return out
+
+
+def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:
+    """(T,3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), yaw unwrapped along T."""
+    roll = np.arctan2(rotations[:, 2, 1], rotations[:, 2, 2])
+    pitch = np.arctan2(-rotations[:, 2, 0], np.hypot(rotations[:, 0, 0], rotations[:, 1, 0]))
+    yaw = np.unwrap(np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0]))
+    return np.stack([roll, pitch, yaw], axis=1)
+
+
+def world_angular_velocity(rotations: np.ndarray, dt: float) -> np.ndarray:
+    """(T,3) angular velocity in the world frame: central differences on SO(3), one-sided ends.
+
+    log(R_{t+1} R_{t-1}^T) / (2 dt) is exact for a constant world angular velocity.
+    """
+    rot = Rotation.from_matrix(rotations)
+    omega = np.empty((len(rotations), 3))
+    omega[1:-1] = (rot[2:] * rot[:-2].inv()).as_rotvec() / (2 * dt)
+    omega[0] = (rot[1] * rot[0].inv()).as_rotvec() / dt
+    omega[-1] = (rot[-1] * rot[-2].inv()).as_rotvec() / dt
+    return omega
+
+
+def clip_features(
+    trajectory: Trajectory, layout: FeatureLayout
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(X (N, in), Y (N, out), steps (N,)) of one clip, unnormalised, physical units."""
+    n = len(trajectory)
+    if n < 2:
+        return np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty(0, int)
+    dt = 1.0 / trajectory.rate_hz
+    rotations = Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()
+    if layout.variant == "ground_projected":
+        rotations = yaw_only(rotations)
+    position = trajectory.base_position
+    joints = trajectory.joint_positions
+    rpy = matrix_to_rpy(rotations)
+    linear = np.gradient(position, dt, axis=0, edge_order=1)
+    angular = world_angular_velocity(rotations, dt)
+    joint_velocities = np.gradient(joints, dt, axis=0, edge_order=1)
+
+    offsets = layout.input_offsets + layout.output_offsets
+    first, last = max(1, -min(offsets)), n - 1 - max(offsets)
+    steps = np.arange(first, last + 1)
+    if len(steps) == 0:
+        return np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), steps
+
+    centre_t = rotations[steps].transpose(0, 2, 1)  # base <- world at step i
+
+    def window(velocity: np.ndarray, window_offsets: tuple[int, ...]) -> np.ndarray:
+        """(N, 3 k) velocities at steps + offsets, written in the base frame at each step."""
+        at = velocity[steps[:, None] + np.asarray(window_offsets)[None, :]]  # (N, k, 3)
+        return np.einsum("nij,nkj->nki", centre_t, at).reshape(len(steps), -1)
+
+    def state(at: np.ndarray) -> list[np.ndarray]:
+        return [joints[at], joint_velocities[at], position[at], rpy[at]]
+
+    x = np.concatenate(
+        [window(linear, layout.input_offsets), window(angular, layout.input_offsets)]
+        + state(steps - 1),
+        axis=1,
+    )
+    y = np.concatenate(
+        [window(linear, layout.output_offsets), window(angular, layout.output_offsets)]
+        + state(steps),
+        axis=1,
+    )
+    return x, y, steps
+
+
+def split_sources(sources: Iterable[str], test_fraction: float, seed: int) -> set[str]:
+    """The source clips held out for testing: a seeded shuffle of the sorted unique names."""
+    unique = sorted(set(sources))
+    if not 0.0 < test_fraction < 1.0:
+        raise PimannError(None, f"features.test_fraction must be in (0, 1), not {test_fraction}")
+    if len(unique) < 2:
+        raise PimannError(None, f"need at least 2 source clips to split, got {len(unique)}")
+    n_test = min(len(unique) - 1, max(1, int(round(test_fraction * len(unique)))))
+    order = np.random.default_rng(seed).permutation(len(unique))
+    return {unique[k] for k in order[:n_test]}
+
+
+@dataclasses.dataclass
+class FeatureDataset:
+    """Normalised train/test arrays, their statistics and where every sample came from."""
+
+    x_train: np.ndarray
+    y_train: np.ndarray
+    x_test: np.ndarray
+    y_test: np.ndarray
+    stats: Normalisation
+    layout: FeatureLayout
+    clips: list[str]  # group names, indexed by the first column of `*_origin`
+    sources: list[str]  # each clip's source (a clip and its mirror share one)
+    train_origin: np.ndarray  # (N, 2) clip index, step
+    test_origin: np.ndarray
+
+    @property
+    def train_clips(self) -> list[str]:
+        return [self.clips[k] for k in np.unique(self.train_origin[:, 0])]
+
+    @property
+    def test_clips(self) -> list[str]:
+        return [self.clips[k] for k in np.unique(self.test_origin[:, 0])]
+
+
+def build_dataset(
+    clips: Sequence[tuple[str, Trajectory]], params: FeaturesParams, variant: str
+) -> FeatureDataset:
+    """Features of every clip, split by source clip, normalised with training statistics."""
+    if not clips:
+        raise PimannError(params.input, "no clips to build features from")
+    rates = {float(t.rate_hz) for _, t in clips}
+    if len(rates) != 1:
+        raise PimannError(params.input, f"clips have different rates {sorted(rates)} Hz")
+    layout = window_layout(params, rates.pop(), variant)
+    names = [name for name, _ in clips]
+    sources = [t.source for _, t in clips]
+    test_sources = split_sources(sources, params.test_fraction, params.split_seed)
+    parts: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {False: [], True: []}
+    for k, (name, trajectory) in enumerate(clips):
+        x, y, steps = clip_features(trajectory, layout)
+        if len(steps) == 0:
+            log.info("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
+        origin = np.stack([np.full(len(steps), k), steps], axis=1)
+        parts[trajectory.source in test_sources].append((x, y, origin))
+
+    def stack(side: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        items = parts[side] or [
+            (np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty((0, 2)))
+        ]
+        x, y, origin = (np.concatenate(a) for a in zip(*items, strict=True))
+        return x, y, origin.astype(np.int64)
+
+    x_train, y_train, train_origin = stack(False)
+    x_test, y_test, test_origin = stack(True)
+    if len(x_train) == 0 or len(x_test) == 0:
+        raise PimannError(
+            params.input, f"empty split: {len(x_train)} train, {len(x_test)} test samples"
+        )
+    stats = Normalisation.fit(x_train, y_train)
+    return FeatureDataset(
+        x_train=stats.normalise_x(x_train).astype(np.float32),
+        y_train=stats.normalise_y(y_train).astype(np.float32),
+        x_test=stats.normalise_x(x_test).astype(np.float32),
+        y_test=stats.normalise_y(y_test).astype(np.float32),
+        stats=stats,
+        layout=layout,
+        clips=names,
+        sources=sources,
+        train_origin=train_origin,
+        test_origin=test_origin,
+    )
+
+
+def _arrays(dataset: FeatureDataset) -> dict[str, np.ndarray]:
+    """The file's datasets, by name."""
+    stats = dataset.stats
+    return {
+        "X_train": dataset.x_train, "Y_train": dataset.y_train,
+        "X_test": dataset.x_test, "Y_test": dataset.y_test,
+        "X_mean": stats.x_mean, "X_std": stats.x_std,
+        "Y_mean": stats.y_mean, "Y_std": stats.y_std,
+        "train_origin": dataset.train_origin, "test_origin": dataset.test_origin,
+    }  # fmt: skip
+
+
+def write_dataset(path: str | Path, dataset: FeatureDataset) -> None:
+    """One HDF5 file: X/Y train/test, the statistics, the layout and the clip lists."""
+    with atomic_path(path) as tmp, h5py.File(tmp, "w") as file:
+        for name, values in _arrays(dataset).items():
+            file.create_dataset(name, data=values)
+        file.attrs["layout"] = dataset.layout.to_json()
+        file.attrs["x_names"] = dataset.layout.names("x")
+        file.attrs["y_names"] = dataset.layout.names("y")
+        for name, part in dataset.layout.x_slices.items():
+            file.attrs[f"x_slice.{name}"] = (part.start, part.stop)
+        for name, part in dataset.layout.y_slices.items():
+            file.attrs[f"y_slice.{name}"] = (part.start, part.stop)
+        file.attrs["clips"] = dataset.clips
+        file.attrs["sources"] = dataset.sources
+        file.attrs["train_clips"] = dataset.train_clips
+        file.attrs["test_clips"] = dataset.test_clips
+
+
+def read_dataset(path: str | Path) -> FeatureDataset:
+    path = Path(path)
+    try:
+        file = h5py.File(path, "r")
+    except (FileNotFoundError, OSError) as error:
+        raise PimannError(path, f"cannot open the feature dataset ({error})") from None
+    with file:
+        needed = ("X_train", "Y_train", "X_test", "Y_test", "X_mean", "X_std", "Y_mean", "Y_std")
+        missing = [n for n in needed if n not in file]
+        if missing or "layout" not in file.attrs:
+            raise PimannError(path, f"not a feature dataset (lacks {missing or ['layout']})")
+        stats = Normalisation(*(file[n][()] for n in ("X_mean", "X_std", "Y_mean", "Y_std")))
+        return FeatureDataset(
+            x_train=file["X_train"][()],
+            y_train=file["Y_train"][()],
+            x_test=file["X_test"][()],
+            y_test=file["Y_test"][()],
+            stats=stats,
+            layout=FeatureLayout.from_json(file.attrs["layout"]),
+            clips=[str(c) for c in file.attrs["clips"]],
+            sources=[str(s) for s in file.attrs["sources"]],
+            train_origin=file["train_origin"][()],
+            test_origin=file["test_origin"][()],
+        )

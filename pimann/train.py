@@ -1,0 +1,398 @@
+"""Training of the (physics-informed) MANN: L = L_D + w L_B (SPEC 5, 6; Eq. overall_loss).
+
+The seeds of one PI weight train together as one vectorised ensemble (`MANN.from_seeds`):
+the members never mix (their losses are summed, AdamW acts elementwise), so member k is the
+model seed k would give alone, at a fraction of the cost. Each member draws its own data
+order from its seed; dropout draws from a torch seed fixed per epoch, so a run resumed from
+its per-epoch checkpoint continues exactly as an uninterrupted one.
+
+L_D is the MSE on the normalised outputs; L_B (`PhysicsInformedLoss`) is taken in physical
+units on the denormalised prediction: the base twist at step i (the output window's offset
+0), the joint velocities, and the configuration (base position, rpy, joints) predicted, or
+the ground truth's with `train.pi_configuration: ground_truth`.
+
+Optimiser as in the authors' code: AdamW, lr 1e-4 and weight decay 0.0025 / sqrt(batches
+per epoch x Te), both annealed per epoch by cosine warm restarts (Te = 10, Tmult = 2). The
+epoch with the lowest test loss is kept, per member.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from pimann.atomic import atomic_path
+from pimann.errors import PimannError
+from pimann.features import FeatureLayout, Normalisation, read_dataset
+from pimann.mann import MANN
+from pimann.params import ModelParams, Params, as_dict
+from pimann.physics_loss import PhysicsInformedLoss
+from pimann.robot import load_robot
+
+log = logging.getLogger(__name__)
+
+MODEL_FILE = "model.pt"
+META_FILE = "meta.json"
+CHECKPOINT_FILE = "checkpoint.pt"
+STAT_NAMES = ("x_mean", "x_std", "y_mean", "y_std")
+LOSS_COLUMNS = ("train_loss", "train_mse", "train_pi", "test_loss", "test_mse", "test_pi")
+
+
+def pick_device(setting: str = "auto") -> torch.device:
+    """`auto`: CUDA when present, else CPU."""
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise PimannError(None, "train.device is cuda but no CUDA device is available")
+    if setting == "auto":
+        setting = "cuda" if torch.cuda.is_available() else "cpu"
+    return torch.device(setting)
+
+
+def schedule_factor(epoch: int, period: int, mult: int) -> float:
+    """Cosine warm restarts: 0.5 (1 + cos(pi t / T)) at epoch t of the current cycle of T."""
+    if period < 1 or mult < 1:
+        raise PimannError(None, "train.restart_period and restart_mult must be >= 1")
+    t, length = epoch, period
+    while t >= length:
+        t -= length
+        length *= mult
+    return 0.5 * (1.0 + math.cos(math.pi * t / length))
+
+
+def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
+    """The member's sample order in one epoch: a function of (seed, epoch) only."""
+    return np.random.default_rng([seed, epoch]).permutation(n)
+
+
+def _epoch_seed(seeds: list[int], epoch: int) -> int:
+    """The torch seed for dropout in one epoch (so resuming needs no saved RNG state)."""
+    return int(np.random.SeedSequence([*seeds, epoch, 0x5EED]).generate_state(1)[0])
+
+
+class TrainingLoss(torch.nn.Module):
+    """Per-member L_D (normalised MSE) and L_B (physical units) of an ensemble's prediction."""
+
+    def __init__(
+        self,
+        layout: FeatureLayout,
+        stats: Normalisation,
+        pi_configuration: str,
+        device: torch.device,
+    ):
+        super().__init__()
+        self.layout, self.pi_configuration = layout, pi_configuration
+        self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
+        self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
+        self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
+        self.to(device)
+
+    def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Denormalised quantities of y (..., out) that L_B needs, by argument name."""
+        physical = y * self.y_std + self.y_mean
+        s = self.layout.y_slices
+        now = self.layout.current_output
+
+        def at_now(block: str) -> torch.Tensor:
+            return physical[..., s[block]].unflatten(-1, (-1, 3))[..., now, :]
+
+        return {
+            "base_position": physical[..., s["base_position"]],
+            "base_rpy": physical[..., s["base_rpy"]],
+            "joints": physical[..., s["joints"]],
+            "base_linear_velocity": at_now("base_linear_future"),
+            "base_angular_velocity": at_now("base_angular_future"),
+            "joint_velocities": physical[..., s["joint_velocities"]],
+        }
+
+    def forward(
+        self, prediction: torch.Tensor, target: torch.Tensor, with_pi: bool = True
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False."""
+        mse = (prediction - target).square().mean(dim=(-2, -1))
+        if not with_pi:
+            return mse, torch.zeros_like(mse)
+        terms = self.pi_terms(prediction)
+        if self.pi_configuration == "ground_truth":
+            truth = self.pi_terms(target)
+            for name in ("base_position", "base_rpy", "joints"):
+                terms[name] = truth[name]
+        return mse, self.physics(**terms).mean(-1)
+
+
+@dataclasses.dataclass
+class _State:
+    """Everything a resumed run needs; saved after every epoch."""
+
+    epoch: int  # epochs completed
+    model: dict
+    optimizer: dict
+    best: dict  # per-parameter tensors holding each member's best epoch
+    best_loss: list[float]
+    best_epoch: list[int]
+    history: list[list[dict]]  # per member, one row per epoch
+
+
+def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params: Params) -> str:
+    """What a checkpoint must match to be resumed (the epoch count may grow)."""
+    train = dataclasses.replace(params.train, epochs=0, eval_batch_size=0, device="auto")
+    digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
+    blob = json.dumps(
+        [digest, pi_weight, seeds, as_dict(params.model), as_dict(train)], sort_keys=True
+    )
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def _evaluate(
+    model: MANN,
+    loss: TrainingLoss,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    batch: int,
+    with_pi: bool,
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Test-set (mse, pi) per member, averaged over samples, dropout off."""
+    model.eval()
+    totals = torch.zeros(2, model.ensemble, device=x.device)
+    with torch.no_grad():
+        for start in range(0, len(x), batch):
+            xb = x[start : start + batch].expand(model.ensemble, -1, -1)
+            yb = y[start : start + batch].expand(model.ensemble, -1, -1)
+            mse, pi = loss(model(xb), yb, with_pi)
+            totals += torch.stack([mse, pi]) * xb.shape[1]
+    model.train()
+    return totals[0] / len(x), totals[1] / len(x)
+
+
+@contextlib.contextmanager
+def _deterministic():
+    """torch's deterministic algorithms for the run, the caller's setting restored after."""
+    before = torch.are_deterministic_algorithms_enabled()
+    warn = torch.is_deterministic_algorithms_warn_only_enabled()
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(before, warn_only=warn)
+
+
+def train_models(
+    dataset_path: str | Path,
+    out_dir: str | Path,
+    pi_weight: float,
+    seeds: list[int],
+    params: Params,
+    device: torch.device | str | None = None,
+    checkpoint_dir: str | Path | None = None,
+    plots_dir: str | Path | None = None,
+    stop_after: int | None = None,
+) -> dict[int, dict]:
+    """Train one model per seed for `pi_weight`; write out_dir/<seed>/ and the loss CSVs.
+
+    Resumes from `checkpoint_dir` (default: out_dir's sibling `.checkpoints/<name>`) when a
+    checkpoint of the same data and parameters is there (it is removed once the models are
+    written). `stop_after` stops after that many epochs in total without writing the models (a
+    stand-in for an interruption). Returns each seed's meta data.
+    """
+    with _deterministic():
+        return _train(
+            Path(dataset_path), Path(out_dir), pi_weight, list(seeds), params, device,
+            checkpoint_dir, plots_dir, stop_after,
+        )  # fmt: skip
+
+
+def _train(
+    dataset_path: Path,
+    out_dir: Path,
+    pi_weight: float,
+    seeds: list[int],
+    params: Params,
+    device: torch.device | str | None,
+    checkpoint_dir: str | Path | None,
+    plots_dir: str | Path | None,
+    stop_after: int | None,
+) -> dict[int, dict]:
+    """train_models' body (see there)."""
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise PimannError(None, f"train.seeds must be distinct and non-empty, not {seeds}")
+    config = params.train
+    device = pick_device(config.device) if device is None else torch.device(device)
+    if device.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
+    checkpoint = checkpoint_dir / CHECKPOINT_FILE
+
+    data = read_dataset(dataset_path)
+    if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
+        keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
+        keep = keep.astype(np.int64)
+        data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
+        log.info("training on %d evenly spaced of the training samples", len(keep))
+    x_train, y_train, x_test, y_test = (
+        torch.as_tensor(a, dtype=torch.float32, device=device)
+        for a in (data.x_train, data.y_train, data.x_test, data.y_test)
+    )
+    n, batch = len(x_train), config.batch_size
+    batches = math.ceil(n / batch)
+    weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)
+    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, params.model, seeds)
+    model.to(device).train()
+    optimizer = torch.optim.AdamW(
+        model.parameters(), lr=config.learning_rate, weight_decay=weight_decay
+    )
+    loss_fn = TrainingLoss(data.layout, data.stats, config.pi_configuration, device)
+    fingerprint = _fingerprint(dataset_path, pi_weight, list(seeds), params)
+    members = len(seeds)
+    state = _State(
+        0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
+        [math.inf] * members, [-1] * members, [[] for _ in seeds],
+    )  # fmt: skip
+    if checkpoint.is_file():
+        saved = torch.load(checkpoint, map_location=device, weights_only=True)
+        if saved.get("fingerprint") == fingerprint and saved["epoch"] <= config.epochs:
+            state = _State(**{f.name: saved[f.name] for f in dataclasses.fields(_State)})
+            model.load_state_dict(state.model)
+            optimizer.load_state_dict(state.optimizer)
+            log.info("resuming %s from epoch %d", out_dir, state.epoch)
+        else:
+            log.info("ignoring a checkpoint of other data or parameters in %s", checkpoint_dir)
+
+    with_pi_train = pi_weight != 0.0
+    last = config.epochs if stop_after is None else min(stop_after, config.epochs)
+    progress = tqdm(
+        range(state.epoch, last), initial=state.epoch, total=config.epochs,
+        desc=f"train w={pi_weight:g}", unit="epoch", disable=None,
+    )  # fmt: skip
+    for epoch in progress:
+        factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
+        for group in optimizer.param_groups:
+            group["lr"] = config.learning_rate * factor
+            group["weight_decay"] = weight_decay * factor
+        torch.manual_seed(_epoch_seed(list(seeds), epoch))
+        order = torch.as_tensor(
+            np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
+        )  # (E, N)
+        totals = torch.zeros(2, members, device=device)
+        for start in range(0, n, batch):
+            index = order[:, start : start + batch]
+            mse, pi = loss_fn(model(x_train[index]), y_train[index], with_pi_train)
+            optimizer.zero_grad(set_to_none=True)
+            (mse + pi_weight * pi).sum().backward()
+            optimizer.step()
+            totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
+        train_mse, train_pi = (totals / n).tolist()
+        test = _evaluate(model, loss_fn, x_test, y_test, config.eval_batch_size, True)
+        test_mse, test_pi = (t.tolist() for t in test)
+        if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
+            every = max(1, n // 4096)
+            sample = (x_train[::every], y_train[::every])
+            train_pi = _evaluate(model, loss_fn, *sample, config.eval_batch_size, True)[1].tolist()
+        for k in range(members):
+            row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
+            row.update(
+                train_loss=train_mse[k] + pi_weight * train_pi[k], train_mse=train_mse[k],
+                train_pi=train_pi[k], test_loss=test_mse[k] + pi_weight * test_pi[k],
+                test_mse=test_mse[k], test_pi=test_pi[k],
+            )  # fmt: skip
+            state.history[k].append(row)
+            if row["test_loss"] < state.best_loss[k]:
+                state.best_loss[k], state.best_epoch[k] = row["test_loss"], epoch + 1
+                for name, value in model.state_dict().items():
+                    state.best[name][k] = value[k].detach()
+        mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
+        progress.set_postfix(train=f"{mean['train_loss']:.4f}", test=f"{mean['test_loss']:.4f}")
+        log.info(
+            "w=%g epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, pi %.5f)",
+            pi_weight, epoch + 1, config.epochs, *(mean[c] for c in LOSS_COLUMNS),
+        )  # fmt: skip
+        state.epoch = epoch + 1
+        state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
+        with atomic_path(checkpoint) as tmp:
+            torch.save({**dataclasses.asdict(state), "fingerprint": fingerprint}, tmp)
+    progress.close()
+    if state.epoch < config.epochs:
+        return {}
+
+    model.load_state_dict(state.best)
+    metas = {}
+    with atomic_path(out_dir) as tmp:
+        for k, seed in enumerate(seeds):
+            meta = {
+                "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
+                "best_epoch": state.best_epoch[k], "best_test_loss": state.best_loss[k],
+                "epochs": config.epochs, "train_samples": n, "test_samples": len(x_test),
+                "dataset": str(dataset_path), "train_clips": data.train_clips,
+                "test_clips": data.test_clips,
+                "params": {"model": as_dict(params.model), "train": as_dict(config)},
+            }  # fmt: skip
+            save_model(tmp / str(seed), model.member(k), data.layout, data.stats, meta)
+            metas[seed] = meta
+    if plots_dir is not None:
+        with atomic_path(plots_dir) as tmp:
+            tmp.mkdir()
+            for k, seed in enumerate(seeds):
+                write_loss_csv(tmp / f"seed{seed}.csv", state.history[k])
+    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
+    return metas
+
+
+def write_loss_csv(path: Path, history: list[dict]) -> None:
+    with path.open("w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=["epoch", *LOSS_COLUMNS, "lr"])
+        writer.writeheader()
+        writer.writerows(history)
+
+
+def save_model(
+    directory: Path, model: MANN, layout: FeatureLayout, stats: Normalisation, meta: dict
+) -> None:
+    """A single model's folder: model.pt (weights, sizes, layout, statistics) and meta.json."""
+    if model.ensemble != 1:
+        raise ValueError("save one member at a time (MANN.member)")
+    directory.mkdir(parents=True, exist_ok=True)
+    model_params = meta["params"]["model"]
+    blob = {
+        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
+        "input_dim": model.input_dim,
+        "output_dim": model.output_dim,
+        "model_params": model_params,
+        "layout": layout.to_json(),
+        "stats": {
+            name: torch.as_tensor(getattr(stats, name), dtype=torch.float64) for name in STAT_NAMES
+        },
+    }
+    torch.save(blob, directory / MODEL_FILE)
+    (directory / META_FILE).write_text(json.dumps(meta, indent=2) + "\n")
+
+
+def load_model(
+    directory: str | Path, device: torch.device | str = "cpu"
+) -> tuple[MANN, FeatureLayout, Normalisation, dict]:
+    """(model in eval mode, layout, normalisation, meta) of a folder written by training."""
+    directory = Path(directory)
+    path = directory / MODEL_FILE
+    if not path.is_file():
+        raise PimannError(path, "no trained model here")
+    try:
+        blob = torch.load(path, map_location=device, weights_only=True)
+        meta = json.loads((directory / META_FILE).read_text())
+    except (OSError, RuntimeError, ValueError, KeyError) as error:
+        raise PimannError(path, f"not a readable model ({error})") from None
+    model = MANN(
+        blob["input_dim"], blob["output_dim"], ModelParams(**blob["model_params"]),
+        ensemble=1, seeds=[int(meta["seed"])],
+    )  # fmt: skip
+    model.load_state_dict(blob["state_dict"])
+    model.to(device).eval()
+    stats = Normalisation(*(blob["stats"][n].cpu().numpy() for n in STAT_NAMES))
+    return model, FeatureLayout.from_json(blob["layout"]), stats, meta

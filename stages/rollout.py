@@ -1,0 +1,48 @@
+"""DVC stage `rollout` (one training output) and `rollout_baseline`.
+
+    python stages/rollout.py --models models/w10 --out results/rollouts/w10 [--workers 2]
+
+rolls out every seed of the training output in every scenario of `rollout.scenario_names`,
+with and without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
+the models' meta in <out>/models.json (layout: pimann.evaluate).
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from pimann.errors import PimannError
+from pimann.evaluate import cpu_workers, run_rollouts
+from pimann.params import load_params
+from pimann.paths import REPO_ROOT
+
+log = logging.getLogger("rollout")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--models", type=Path, required=True, help="a training output folder")
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
+    try:
+        params = load_params()
+        started = time.perf_counter()
+        written = run_rollouts(
+            REPO_ROOT / args.models, REPO_ROOT / args.out, params, cpu_workers(args.workers)
+        )
+        log.info("profile %s: %d rollouts -> %s in %.0f s", params.profile, len(written),
+                 args.out, time.perf_counter() - started)  # fmt: skip
+    except PimannError as error:
+        print(error, file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,186 @@
+"""Features: closed-form velocities of a synthetic clip, layout, leak-free split, statistics."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from scipy.spatial.transform import Rotation
+
+from pimann.errors import PimannError
+from pimann.features import (
+    FeatureLayout,
+    build_dataset,
+    clip_features,
+    read_dataset,
+    split_sources,
+    window_layout,
+)
+from pimann.params import load_params
+from pimann.robot import N_JOINTS, STANDING_JOINTS
+from pimann.trajectory import Trajectory
+
+RATE = 50.0
+PITCH = 0.3  # a fixed base tilt, so that base and world frames differ in every axis
+
+
+def synthetic_clip(
+    frames: int = 200,
+    velocity=(0.4, 0.1, 0.02),
+    yaw_rate: float = 0.5,
+    source: str = "clip",
+    mirrored: bool = False,
+    phase: float = 0.0,
+) -> Trajectory:
+    """Base at constant world velocity, R_t = Rz(yaw_rate t) Ry(PITCH), sinusoidal joints."""
+    time = np.arange(frames) / RATE
+    rotation = Rotation.from_euler("z", (yaw_rate * time)[:, None]) * Rotation.from_euler(
+        "y", PITCH
+    )
+    joints = STANDING_JOINTS + 0.2 * np.sin(2 * np.pi * 1.1 * time[:, None] + phase)
+    return Trajectory(
+        time=time,
+        base_position=np.array([0.0, 0.0, 0.77]) + time[:, None] * np.asarray(velocity),
+        base_quaternion_xyzw=rotation.as_quat(),
+        joint_positions=joints,
+        source=source,
+        rate_hz=RATE,
+        attrs={"mirrored": mirrored},
+    )
+
+
+def synthetic_collection(n_sources: int = 6, frames: int = 160) -> list[tuple[str, Trajectory]]:
+    """Each source clip and its 'mirror' (here: another phase), as the retarget stage names."""
+    clips = []
+    for k in range(n_sources):
+        for mirrored in (False, True):
+            name = f"src{k}" + ("_mirror" if mirrored else "")
+            clip = synthetic_clip(
+                frames, velocity=(0.2 + 0.1 * k, 0.0, 0.0), yaw_rate=0.1 * (k - 2),
+                source=f"src{k}", mirrored=mirrored, phase=float(mirrored) + k,
+            )  # fmt: skip
+            clips.append((name, clip))
+    return clips
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params()
+
+
+def test_layout_sizes_and_windows(params):
+    layout = window_layout(params.features, RATE, "full")
+    assert layout.input_dim == 130 and layout.output_dim == 100
+    assert layout.input_offsets == tuple(range(-50, 61, 10))
+    assert layout.output_offsets == tuple(range(0, 61, 10))
+    assert layout.current_output == 0
+    assert len(layout.names("x")) == 130 and len(layout.names("y")) == 100
+    assert FeatureLayout.from_json(layout.to_json()) == layout
+    paper = dataclasses.replace(params.features, window="paper")
+    paper_layout = window_layout(paper, RATE, "full")
+    assert paper_layout.input_offsets == (-42, -33, -25, -17, -8, 0, 8, 17, 25, 33, 42, 50)
+    assert paper_layout.output_offsets == (0, 8, 17, 25, 33, 42, 50)
+    assert paper_layout.input_dim == 130
+    with pytest.raises(PimannError, match="window"):
+        window_layout(dataclasses.replace(params.features, window="nope"), RATE, "full")
+
+
+def test_constant_velocity_features_match_closed_form(params):
+    velocity, yaw_rate = np.array([0.4, 0.1, 0.02]), 1.0
+    clip = synthetic_clip(300, velocity, yaw_rate)
+    layout = window_layout(params.features, RATE, "full")
+    x, y, steps = clip_features(clip, layout)
+    # a full window needs 50 frames before and 60 after; the state needs step i-1
+    assert steps[0] == 50 and steps[-1] == 300 - 1 - 60 and len(x) == len(steps)
+    xs, ys = layout.x_slices, layout.y_slices
+    time = steps / RATE
+    centre = (
+        Rotation.from_euler("z", (yaw_rate * time)[:, None]) * Rotation.from_euler("y", PITCH)
+    ).inv()
+    expected_linear = centre.apply(velocity)  # world velocity in the base frame at i
+    expected_angular = Rotation.from_euler("y", -PITCH).apply([0.0, 0.0, yaw_rate])
+    linear = x[:, xs["base_linear_window"]].reshape(len(x), 12, 3)
+    angular = x[:, xs["base_angular_window"]].reshape(len(x), 12, 3)
+    np.testing.assert_allclose(linear, np.repeat(expected_linear[:, None], 12, 1), atol=1e-9)
+    np.testing.assert_allclose(angular, np.broadcast_to(expected_angular, angular.shape), atol=1e-9)
+    future = y[:, ys["base_linear_future"]].reshape(len(y), 7, 3)
+    np.testing.assert_allclose(future, np.repeat(expected_linear[:, None], 7, 1), atol=1e-9)
+    # state: x at i-1, y at i
+    np.testing.assert_allclose(x[:, xs["joints"]], clip.joint_positions[steps - 1])
+    np.testing.assert_allclose(y[:, ys["base_position"]], clip.base_position[steps])
+    analytic = 0.2 * 2 * np.pi * 1.1 * np.cos(2 * np.pi * 1.1 * time[:, None])
+    velocities = y[:, ys["joint_velocities"]]
+    np.testing.assert_allclose(velocities, np.broadcast_to(analytic, velocities.shape), atol=0.01)
+    # psi against pinocchio's rpy, and yaw unwrapped: continuous past pi
+    rpy = y[:, ys["base_rpy"]]
+    reference = np.array(
+        [pin.rpy.matrixToRpy(Rotation.from_quat(q).as_matrix()) for q in
+         clip.base_quaternion_xyzw[steps]]
+    )  # fmt: skip
+    np.testing.assert_allclose(np.angle(np.exp(1j * (rpy - reference))), 0.0, atol=1e-9)
+    assert rpy[-1, 2] > np.pi and np.all(np.abs(np.diff(rpy[:, 2]) - yaw_rate / RATE) < 1e-9)
+
+
+def test_ground_projected_variant_zeroes_roll_and_pitch(params):
+    velocity, yaw_rate = np.array([0.4, 0.1, 0.02]), -0.3
+    clip = synthetic_clip(200, velocity, yaw_rate)
+    layout = window_layout(params.features, RATE, "ground_projected")
+    x, y, steps = clip_features(clip, layout)
+    xs, ys = layout.x_slices, layout.y_slices
+    np.testing.assert_allclose(y[:, ys["base_rpy"]][:, :2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(y[:, ys["base_rpy"]][:, 2], yaw_rate * steps / RATE, atol=1e-9)
+    np.testing.assert_allclose(y[:, ys["base_position"]][:, 2], clip.base_position[steps, 2])
+    yaw = Rotation.from_euler("z", (yaw_rate * steps / RATE)[:, None])
+    linear = x[:, xs["base_linear_window"]].reshape(len(x), 12, 3)
+    np.testing.assert_allclose(linear[:, 0], yaw.inv().apply(velocity), atol=1e-9)
+    angular = x[:, xs["base_angular_window"]].reshape(len(x), 12, 3)
+    np.testing.assert_allclose(angular, np.broadcast_to([0, 0, yaw_rate], angular.shape), atol=1e-9)
+
+
+def test_split_keeps_mirrors_with_their_clip_and_does_not_leak(params):
+    clips = synthetic_collection(n_sources=10)
+    features = dataclasses.replace(params.features, test_fraction=0.2)
+    dataset = build_dataset(clips, features, "full")
+    source_of = dict(zip(dataset.clips, dataset.sources, strict=True))
+    train_sources = {source_of[c] for c in dataset.train_clips}
+    test_sources = {source_of[c] for c in dataset.test_clips}
+    assert not train_sources & test_sources
+    assert len(test_sources) == 2 and len(train_sources) == 8
+    for source in test_sources:  # both the clip and its mirror are held out
+        assert {f"{source}", f"{source}_mirror"} <= set(dataset.test_clips)
+    # deterministic, and another seed picks another split
+    assert split_sources(dataset.sources, 0.2, 0) == test_sources
+    assert any(split_sources(dataset.sources, 0.2, s) != test_sources for s in range(1, 5))
+    with pytest.raises(PimannError, match="2 source clips"):
+        build_dataset(clips[:2], features, "full")
+
+
+def test_normalisation_uses_training_statistics_only(params, tmp_path):
+    from pimann.features import write_dataset
+
+    clips = synthetic_collection(n_sources=6)
+    dataset = build_dataset(clips, params.features, "full")
+    layout = dataset.layout
+    raw = {name: clip_features(t, layout) for name, t in clips}
+    x_train = np.concatenate([raw[c][0] for c in dataset.train_clips])
+    x_all = np.concatenate([raw[c][0] for c in dataset.clips])
+    y_train = np.concatenate([raw[c][1] for c in dataset.train_clips])
+    np.testing.assert_allclose(dataset.stats.x_mean, x_train.mean(0))
+    np.testing.assert_allclose(dataset.stats.y_mean, y_train.mean(0))
+    assert not np.allclose(dataset.stats.x_mean, x_all.mean(0))
+    constant = x_train.std(0) < 1e-8
+    assert constant.any() and np.all(dataset.stats.x_std[constant] == 1.0)
+    np.testing.assert_allclose(dataset.x_train.mean(0), 0.0, atol=1e-5)
+    np.testing.assert_allclose(dataset.x_train.std(0)[~constant], 1.0, atol=1e-4)
+    np.testing.assert_allclose(
+        dataset.stats.denormalise_y(dataset.y_train.astype(float)), y_train, atol=1e-4
+    )
+    path = tmp_path / "full.h5"
+    write_dataset(path, dataset)
+    back = read_dataset(path)
+    assert back.layout == layout and back.test_clips == dataset.test_clips
+    np.testing.assert_array_equal(back.x_test, dataset.x_test)
+    np.testing.assert_array_equal(back.stats.y_std, dataset.stats.y_std)
+    assert N_JOINTS == back.layout.n_joints

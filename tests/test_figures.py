@@ -1,0 +1,120 @@
+"""Figures (issue 4) from a crafted results/ folder: every figure is written as PDF and PNG,
+records its provenance, and a figure whose data is missing is skipped."""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+
+import h5py
+import numpy as np
+import pandas as pd
+import pytest
+from test_evaluate import crafted_metrics
+
+from pimann.evaluate import RolloutKey, provenance, write_results
+from pimann.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
+from pimann.params import load_params
+from pimann.robot import JOINT_NAMES
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params()
+
+
+def crafted_results(root, params, profile: str = "quick", sim: bool = True):
+    """results/ as the evaluate stage writes it, with sinusoidal time series."""
+    frame = crafted_metrics()
+    selection = {
+        "base_baseline": RolloutKey("baseline", 2, "forward", False),
+        "base_pi": RolloutKey("w10", 2, "forward", False),
+        "base_pi_steering": RolloutKey("w10", 2, "forward", True),
+        **{f"feet_w{w}": RolloutKey(f"w{w}", 2, "forward", False) for w in (0, 1, 10, 20, 100)},
+    }
+    info = {**provenance(params), "profile": profile}
+    write_results(frame, root, params, info, selection)
+    t = np.arange(500) / 50.0
+    (root / "timeseries").mkdir()
+    for k, name in enumerate(("base_baseline", "base_pi", "base_pi_steering")):
+        pd.DataFrame(
+            {"time": t, "base_x": 0.4 * t, "base_y": 0.02 * k * t, "base_z": 0.01 * np.sin(t),
+             "base_roll": 0.01 * np.sin(3 * t), "base_pitch": 0.02 * np.cos(3 * t),
+             "base_yaw": 0.01 * k * t}
+        ).to_csv(root / "timeseries" / f"{name}.csv", index=False)  # fmt: skip
+    for w in (0, 1, 10, 20, 100):
+        phase = 2 * np.pi * t
+        pd.DataFrame(
+            {"time": t,
+             "left_foot_height": np.maximum(0, 0.05 * np.sin(phase)),
+             "right_foot_height": np.maximum(0, -0.05 * np.sin(phase)),
+             "left_sole_pitch": 0.002 * w * np.sin(phase),
+             "right_sole_pitch": -0.002 * w * np.sin(phase),
+             "left_contact": (np.sin(phase) <= 0).astype(int),
+             "right_contact": (np.sin(phase) >= 0).astype(int)}
+        ).to_csv(root / "timeseries" / f"feet_w{w}.csv", index=False)  # fmt: skip
+    if sim:
+        (root / "sim").mkdir()
+        with h5py.File(root / "sim" / "mixed.h5", "w") as file:
+            reference = 0.1 * np.sin(t[:, None] + np.arange(26))
+            file["time"] = t
+            file["joints_reference"] = reference
+            file["joints_measured"] = reference + 0.01
+            file["joints_generated"] = reference - 0.01
+            file.attrs["joint_names"] = list(JOINT_NAMES)
+    return root
+
+
+def test_every_figure_is_written_with_provenance(params, tmp_path):
+    results = crafted_results(tmp_path / "results", params)
+    out = tmp_path / "figures"
+    written = make_figures(results, out, params.figures)
+    assert set(written) == set(FIGURES)
+    for name in FIGURES:
+        pdf, png = (out / f"{name}.{fmt}" for fmt in ("pdf", "png"))
+        assert pdf.read_bytes().startswith(b"%PDF") and pdf.stat().st_size > 2000, name
+        assert png.read_bytes().startswith(b"\x89PNG") and png.stat().st_size > 2000, name
+        assert b"profile=quick" in pdf.read_bytes(), name  # PDF Info dictionary
+        assert b"profile" in png.read_bytes(), name  # PNG text chunk
+    assert not list(out.glob(".*"))  # no temporary left behind
+
+
+def test_footer_only_when_not_the_paper_profile(params, tmp_path):
+    with_quick = load_results(crafted_results(tmp_path / "quick", params, "quick"))
+    with_paper = load_results(crafted_results(tmp_path / "paper", params, "paper"))
+    for results, expected in ((with_quick, ["profile: quick"]), (with_paper, [])):
+        fig = fig_foot_heights(results, params.figures)
+        save_figure(fig, tmp_path / f"out_{results.provenance['profile']}", "f",
+                    results.provenance)  # fmt: skip
+        assert [t.get_text() for t in fig.texts] == expected
+        assert fig.get_size_inches()[0] == pytest.approx(params.figures.width_in)
+
+
+def test_missing_data_skips_the_figure(params, tmp_path, caplog):
+    results = crafted_results(tmp_path / "results", params, sim=False)
+    for path in (results / "timeseries").glob("feet_*.csv"):
+        path.unlink()
+    caplog.set_level(logging.INFO, logger="pimann.figures")
+    written = make_figures(results, tmp_path / "out", params.figures)
+    assert set(written) == set(FIGURES) - {"joint_tracking", "foot_rotations", "foot_heights"}
+    assert "joint_tracking: no simulation traces" in caplog.text
+
+
+def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    linear = fig.axes[0]
+    labels = [t.get_text() for t in linear.get_xticklabels()]
+    assert labels == [f"{w:g}" for w in params.figures.box_weights]
+    baseline = [line for line in linear.get_lines() if line.get_label() == "baseline"]
+    frame = results.metrics
+    rows = (frame["model"] == "baseline") & ~frame["steering"]
+    expected = np.median(frame.loc[rows, "support_rmse_linear_total"])
+    assert baseline and baseline[0].get_ydata()[0] == pytest.approx(expected)
+
+
+def test_figures_follow_params(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    wide = dataclasses.replace(params.figures, width_in=7.0, foot_height_weights=[1.0])
+    fig = fig_foot_heights(results, wide)
+    assert fig.get_size_inches()[0] == pytest.approx(7.0) and len(fig.axes) == 1

@@ -1,0 +1,355 @@
+"""Autoregressive generation and steering (issue 4): real pinocchio, real generate() code path.
+
+The drift and stop checks use an analytic gait "network": a torch module that maps x to a
+consistent y (a stepping gait whose phase is carried in the input's neck joints and whose
+step length follows the velocities in the input window), so the outcome is known. The
+contact check trains a tiny MANN on features of that gait and rolls it out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pinocchio as pin
+import pytest
+import torch
+from torch import nn
+
+from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configurations
+from pimann.errors import PimannError
+from pimann.features import FeatureLayout, Normalisation, clip_features, matrix_to_rpy
+from pimann.generate import (
+    _interpolation,
+    generate,
+    generate_file,
+    generate_rollout,
+    scenario_steps,
+)
+from pimann.mann import MANN
+from pimann.params import ModelParams, MotionSegment, StandSegment, load_params
+from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
+from pimann.steering import yaw_of
+from pimann.trajectory import read_trajectory
+
+LAYOUT = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, "full")
+IDENTITY = Normalisation(
+    np.zeros(LAYOUT.input_dim),
+    np.ones(LAYOUT.input_dim),
+    np.zeros(LAYOUT.output_dim),
+    np.ones(LAYOUT.output_dim),
+)
+NECK = [JOINT_NAMES.index("neck_pitch"), JOINT_NAMES.index("neck_roll")]
+FORWARD = [MotionSegment(10.0, 0.5, 0.0, 0.0)]
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params()
+
+
+def crouched_legs(robot, drop: float = 0.06) -> tuple[np.ndarray, np.ndarray]:
+    """Standing joints with both soles `drop` higher in the base frame (knees bent, feet flat),
+    by Newton steps on the 6-joint legs, and each leg's joints per sole displacement there
+    (2, 6, 3): away from the straight-knee singularity, so small displacements stay small."""
+    joints = STANDING_JOINTS.copy()
+    legs = ((LEFT_SOLE, slice(0, 6)), (RIGHT_SOLE, slice(6, 12)))
+    base = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]
+    targets = []
+    for frame, _ in legs:
+        placement = robot.frame_placement(robot.configuration(*base, joints), frame)
+        placement.translation = placement.translation + np.array([0.0, 0.0, drop])
+        targets.append(placement)
+    for _ in range(20):
+        q = robot.configuration(*base, joints)
+        for (frame, part), target in zip(legs, targets, strict=True):
+            error = pin.log6(robot.frame_placement(q, frame).actInv(target)).vector
+            jacobian = robot.frame_jacobian(q, frame, pin.LOCAL)[:, 6:][:, part]
+            joints[part] += np.linalg.solve(jacobian, error)
+    q = robot.configuration(*base, joints)
+    inverse = [
+        np.linalg.inv(robot.frame_jacobian(q, frame, pin.LOCAL_WORLD_ALIGNED)[:, 6:][:, part])
+        for frame, part in legs
+    ]
+    return joints, np.stack(inverse)[:, :, :3]
+
+
+class GaitModel(nn.Module):
+    """A periodic stepping gait as a pure function of x (physical units, identity stats).
+
+    Phase phi: the angle of the neck joints' offset from standing (0 at standing), advanced by
+    omega dt each step. Feet (relative to the base) swing on x and y by the mean commanded
+    velocity of the input window's future half times the half period, and lift in their swing
+    half; joints by the legs' inverse Jacobian at standing (feet kept flat). The predicted base
+    velocities echo the window's future mean; `bias` adds to the lateral and yaw rate outputs.
+    """
+
+    def __init__(self, robot, period=1.0, lift=0.05, bias=(0.0, 0.0), stride=1.0):
+        super().__init__()
+        self.omega, self.lift, self.dt = 2 * math.pi / period, lift, 1 / LAYOUT.rate_hz
+        self.stride = stride  # 0: steps in place whatever the command
+        self.bias = bias
+        crouch, inverse = crouched_legs(robot)
+        self.register_buffer("inverse", torch.tensor(inverse, dtype=torch.float32))
+        self.register_buffer("standing", torch.tensor(STANDING_JOINTS, dtype=torch.float32))
+        self.register_buffer("crouch", torch.tensor(crouch, dtype=torch.float32))
+        self.anchor = nn.Parameter(torch.zeros(1))  # gives generate() a device and dtype
+
+    def _joints(self, phase: torch.Tensor, amplitude: torch.Tensor) -> torch.Tensor:
+        sin, cos = torch.sin(phase), torch.cos(phase)
+        left = torch.stack(
+            [amplitude[:, 0] * sin, amplitude[:, 1] * sin, self.lift * torch.clamp(cos, min=0)], -1
+        )
+        right = torch.stack(
+            [-amplitude[:, 0] * sin, -amplitude[:, 1] * sin, self.lift * torch.clamp(-cos, min=0)],
+            -1,
+        )
+        joints = self.crouch.expand(len(phase), -1).clone()
+        joints[:, 0:6] += left @ self.inverse[0].T
+        joints[:, 6:12] += right @ self.inverse[1].T
+        joints[:, NECK[0]] += 0.05 * cos
+        joints[:, NECK[1]] += 0.05 * sin
+        return joints
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        xs = LAYOUT.x_slices
+        n_future = sum(o > 0 for o in LAYOUT.input_offsets)
+        linear = x[:, xs["base_linear_window"]].view(len(x), -1, 3)[:, -n_future:].mean(1)
+        angular = x[:, xs["base_angular_window"]].view(len(x), -1, 3)[:, -n_future:].mean(1)
+        neck = x[:, xs["joints"]][:, NECK] - self.standing[NECK]
+        phase = torch.atan2(neck[:, 1], neck[:, 0]) + self.omega * self.dt
+        amplitude = linear[:, :2] * (self.stride * math.pi / (2 * self.omega))
+        joints = self._joints(phase, amplitude)
+        velocity = (joints - self._joints(phase - self.omega * self.dt, amplitude)) / self.dt
+        linear = linear + torch.tensor([0.0, self.bias[0], 0.0])
+        angular = angular + torch.tensor([0.0, 0.0, self.bias[1]])
+        n_out = len(LAYOUT.output_offsets)
+        return torch.cat(
+            [
+                linear.repeat(1, n_out),
+                angular.repeat(1, n_out),
+                joints,
+                velocity,
+                x[:, xs["base_position"]],
+                x[:, xs["base_rpy"]],
+            ],
+            dim=1,
+        )
+
+
+def roll(model, scenario, params, steering, robot, stats=IDENTITY, layout=LAYOUT, **changes):
+    rollout_params = dataclasses.replace(params.rollout, **changes)
+    return generate_rollout(
+        model,
+        layout,
+        stats,
+        scenario,
+        rollout_params,
+        steering,
+        robot,
+        contact_params=params.evaluate,
+    )
+
+
+def test_scenario_steps_follow_the_segments():
+    scenario = [StandSegment(0.5, True), MotionSegment(1.0, 0.5, 0.0, 0.0)]
+    steps = scenario_steps(scenario, 50.0)
+    assert len(steps) == 75 and (steps[:25] == 0).all() and (steps[25:] == 1).all()
+
+
+def test_future_window_interpolation_matches_numpy(rng):
+    knots = np.array([0.0, 8, 17, 25, 33, 42, 50])  # the paper's output window at 50 Hz
+    targets = np.array([-3.0, 9, 18, 26, 34, 43, 51])
+    values = rng.normal(size=(len(knots), 3))
+    expected = np.stack([np.interp(targets, knots, values[:, c]) for c in range(3)], 1)
+    np.testing.assert_allclose(_interpolation(targets, knots) @ values, expected, atol=1e-12)
+
+
+def test_gait_walks_forward_with_alternating_contacts(robot, params):
+    rollout = roll(GaitModel(robot), FORWARD, params, False, robot)
+    trajectory = rollout.trajectory
+    assert len(trajectory) == 501 and trajectory.attrs["steering"] is False
+    # the network's commanded 0.5 m/s, realised by leg odometry alone
+    speed = (trajectory.base_position[-1, 0] - trajectory.base_position[50, 0]) / 9.0
+    assert 0.3 < speed < 0.7
+    # leg odometry keeps the support foot's lowest corner on the ground (independent FK)
+    heights = foot_kinematics(robot, trajectory_configurations(robot, trajectory)).heights
+    np.testing.assert_allclose(heights[1:].min(axis=1), 0.0, atol=1e-9)
+    # contacts from the streaming trigger equal the whole-trajectory detection
+    np.testing.assert_array_equal(
+        trajectory.contacts, detect_contacts(robot, trajectory, params.evaluate)
+    )
+    swings = [np.flatnonzero(np.diff(trajectory.contacts[:, f].astype(int)) == -1) for f in (0, 1)]
+    assert min(len(s) for s in swings) >= 8  # ~one lift-off per foot and second
+    assert (np.diff(rollout.support) != 0).sum() >= 16
+
+
+def test_orientation_integrates_the_angular_velocity(robot, params):
+    scenario = [MotionSegment(4.0, 0.3, 0.0, 0.25)]
+    trajectory = roll(GaitModel(robot), scenario, params, False, robot).trajectory
+    from scipy.spatial.transform import Rotation
+
+    yaw = np.unwrap(yaw_of(Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()))
+    # the window's future mean reaches the command within the first second
+    rate = np.diff(yaw[100:]) * 50.0
+    np.testing.assert_allclose(rate, 0.25, atol=0.01)
+
+
+def test_steering_cuts_lateral_and_yaw_drift(robot, params):
+    biased = GaitModel(robot, bias=(0.02, 0.1))
+    drifts = {}
+    for steering in (False, True):
+        trajectory = roll(biased, FORWARD, params, steering, robot).trajectory
+        rpy = matrix_to_rpy(
+            np.stack(
+                [pin.Quaternion(*q[[3, 0, 1, 2]]).matrix() for q in trajectory.base_quaternion_xyzw]
+            )
+        )
+        drifts[steering] = abs(trajectory.base_position[-1, 1]), abs(rpy[-1, 2])
+    (lateral_free, yaw_free), (lateral_steered, yaw_steered) = drifts[False], drifts[True]
+    assert yaw_free > 1.0 and lateral_free > 1.0  # the bias makes the free rollout curve
+    assert lateral_steered * 5 < lateral_free
+    assert yaw_steered * 5 < yaw_free
+
+
+@pytest.mark.parametrize("held", ["progress", "carrot"])
+def test_goal_stop_returns_to_standing(robot, params, held):
+    scenario = [MotionSegment(3.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
+    model = GaitModel(robot, bias=(0.02, 0.05))
+    rollout = roll(model, scenario, params, True, robot, held_command=held)
+    trajectory = rollout.trajectory
+    walking = int(np.flatnonzero(~rollout.stopped)[0])  # frame 0 is standing still
+    stop = walking + int(np.flatnonzero(rollout.stopped[walking:])[0])
+    assert 150 < stop < 250  # walked through the motion segment, stopped during 'stand'
+    # at the stop the base is within the radius of the goal (the commanded path's end) or
+    # past it along the commanded direction (x); one frame earlier the command still held
+    offset = trajectory.base_position[stop, :2] - rollout.goals[stop, :2]
+    assert np.hypot(*offset) <= params.rollout.goal_radius or offset[0] >= 0
+    assert stop == 151 or np.hypot(*offset) <= params.rollout.goal_radius
+    # the path runs along x from the start; `carrot` runs at the commanded 0.5 m/s for 3 s,
+    # `progress` as far as the base went
+    path_x = 1.5 if held == "carrot" else trajectory.base_position[stop - 1, 0]
+    np.testing.assert_allclose(rollout.goals[stop, :2], [path_x, 0.0], atol=0.02)
+    blend = int(round(params.rollout.stop_blend_s * 50))
+    np.testing.assert_array_equal(
+        trajectory.joint_positions[stop + blend :],
+        np.broadcast_to(STANDING_JOINTS, (len(trajectory) - stop - blend, 26)),
+    )
+    assert rollout.stopped[stop:].all()
+    assert trajectory.base_position[-1, 0] > 1.0  # it did walk
+    np.testing.assert_allclose(
+        np.diff(trajectory.base_position[stop + blend :], axis=0), 0, atol=1e-12
+    )
+    assert trajectory.contacts[-1].all()
+
+
+def test_unreached_goal_stops_after_the_timeout(robot, params):
+    scenario = [MotionSegment(1.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
+    stuck = GaitModel(robot, stride=0.0)  # steps in place: never reaches the goal
+    rollout = roll(stuck, scenario, params, True, robot, held_command="carrot")
+    stops = np.flatnonzero(np.diff(rollout.stopped.astype(int)) == 1) + 1
+    timeout = int(round(params.rollout.stop_timeout_s * 50))
+    assert list(stops) == [51 + timeout]  # 'stand' starts at frame 51
+    np.testing.assert_allclose(rollout.goals[-1, :2], [0.5, 0.0], atol=1e-9)  # 1 s x 0.5 m/s
+    assert np.abs(rollout.trajectory.base_position[:, 0]).max() < 0.2
+    np.testing.assert_array_equal(rollout.trajectory.joint_positions[-1], STANDING_JOINTS)
+
+
+def test_stand_without_steering_stops_at_once(robot, params):
+    scenario = [StandSegment(0.5, True), MotionSegment(2.0, 0.5, 0.0, 0.0), StandSegment(1.0, True)]
+    rollout = roll(GaitModel(robot), scenario, params, False, robot)
+    assert rollout.stopped[:26].all() and not rollout.stopped[26:126].any()
+    assert rollout.stopped[126:].all()
+    np.testing.assert_array_equal(
+        rollout.trajectory.joint_positions[:26], np.broadcast_to(STANDING_JOINTS, (26, 26))
+    )
+
+
+@pytest.fixture
+def one_thread():
+    """Tiny batches train far faster on one thread (and do not fight other processes)."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+def test_trained_mann_steps_with_switching_contacts(robot, params, one_thread):
+    data = roll(GaitModel(robot), FORWARD, params, False, robot).trajectory
+    x, y, _ = clip_features(data, LAYOUT)
+    stats = Normalisation.fit(x, y)
+    xn = torch.tensor(stats.normalise_x(x), dtype=torch.float32)
+    yn = torch.tensor(stats.normalise_y(y), dtype=torch.float32)
+    torch.manual_seed(0)
+    small = ModelParams(2, 8, 2, 64, 2, 0.0, "elu")
+    model = MANN(LAYOUT.input_dim, LAYOUT.output_dim, small, seeds=[0])
+    optimiser = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(400):
+        optimiser.zero_grad()
+        loss = torch.mean((model(xn) - yn) ** 2)
+        loss.backward()
+        optimiser.step()
+    assert loss.item() < 0.05
+    trajectory = roll(
+        model, [MotionSegment(1.0, 0.5, 0.0, 0.0)], params, True, robot, stats=stats
+    ).trajectory
+    assert len(trajectory) == 51
+    for foot in (0, 1):  # each foot lifts off at least once
+        assert not trajectory.contacts[:, foot].all()
+    assert trajectory.contacts.any(axis=1).all()  # never both feet in the air
+    assert trajectory.base_position[-1, 0] > 0.03  # accelerating from standing
+
+
+def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, tmp_path):
+    from pimann.train import save_model
+
+    torch.manual_seed(0)
+    small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
+    model = MANN(LAYOUT.input_dim, LAYOUT.output_dim, small, seeds=[3])
+    stats = Normalisation(IDENTITY.x_mean, IDENTITY.x_std, IDENTITY.y_mean, IDENTITY.y_std * 0.01)
+    meta = {
+        "pi_weight": 10.0,
+        "seed": 3,
+        "variant": "full",
+        "params": {"model": dataclasses.asdict(small)},
+    }
+    save_model(tmp_path / "model", model, LAYOUT, stats, meta)
+    short = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(
+            params.rollout, scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]}
+        ),
+    )
+    out = tmp_path / "out.h5"
+    with pytest.raises(PimannError, match="params.yaml.*'nope'"):
+        generate_file(tmp_path / "model", "nope", out, True, short)
+    assert not out.exists()
+    generate_file(tmp_path / "model", "short", out, False, short)
+    trajectory = read_trajectory(out)
+    assert len(trajectory) == 21 and trajectory.contacts.shape == (21, 2)
+    assert trajectory.attrs["steering"] is False or trajectory.attrs["steering"] == 0
+    assert trajectory.attrs["pi_weight"] == 10.0 and trajectory.attrs["seed"] == 3
+    assert "short" in trajectory.source and trajectory.joint_velocities.shape == (21, 26)
+    again = generate(
+        model.eval(),
+        LAYOUT,
+        stats,
+        [MotionSegment(0.4, 0.5, 0.0, 0.0)],
+        short.rollout,
+        False,
+        robot,
+        contact_params=params.evaluate,
+    )
+    np.testing.assert_allclose(again.joint_positions, trajectory.joint_positions, atol=1e-6)
+
+
+def test_ground_projected_baseline_keeps_yaw_only(robot, params):
+    layout = dataclasses.replace(LAYOUT, variant="ground_projected")
+    trajectory = roll(
+        GaitModel(robot), [MotionSegment(2.0, 0.4, 0.0, 0.3)], params, True, robot, layout=layout
+    ).trajectory
+    quaternions = trajectory.base_quaternion_xyzw
+    np.testing.assert_allclose(quaternions[:, :2], 0.0, atol=1e-12)  # rotations about z only
+    yaw = 2 * np.arctan2(quaternions[:, 2], quaternions[:, 3])
+    assert 0.3 < yaw[-1] < 0.7  # turned at about the commanded 0.3 rad/s for 2 s
