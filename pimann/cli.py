@@ -81,6 +81,32 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     print(json.dumps(metrics, indent=2))
 
 
+def cmd_simulate(args: argparse.Namespace) -> None:
+    from pimann.sim.results import write_simulation
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.video import check_video_path, render_simulation
+    from pimann.trajectory import read_trajectory
+
+    params = _params(args).simulate
+    if args.video:
+        check_video_path(args.video)  # before minutes of simulation, not after
+    trajectory = read_trajectory(args.file, args.group)
+    try:
+        result = simulate_trajectory(trajectory, params, args.duration)
+    except PimannError as error:  # name the file, not the trajectory's `source`
+        raise PimannError(args.file, error.problem, frame=error.frame) from None
+    summary = write_simulation(
+        args.output, result, params, source=str(args.file), rate_hz=params.output_rate_hz
+    )
+    if args.video:
+        render_simulation(
+            read_trajectory(args.output), args.video, params,
+            every_n_frames=params.video_every_n, width=params.video_width,
+            height=params.video_height,
+        )  # fmt: skip
+    print(json.dumps(summary, indent=2))
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pimann", description=__doc__.splitlines()[0])
     parser.add_argument(
@@ -118,6 +144,13 @@ def _parser() -> argparse.ArgumentParser:
     )
     generate.add_argument("-o", "--output", type=Path, required=True)
     generate.add_argument("--no-steering", action="store_true", help="no control-informed steering")
+
+    simulate = add("simulate", cmd_simulate, "walk a trajectory in MuJoCo (offline controller)")
+    simulate.add_argument("file", type=Path)
+    simulate.add_argument("-o", "--output", type=Path, required=True, help="result .h5")
+    simulate.add_argument("--group", help="clip group inside a collection file")
+    simulate.add_argument("--video", type=Path, help=".mp4, .gif or .png strip of the walk")
+    simulate.add_argument("--duration", type=float, help="simulate at most this many seconds")
 
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path)

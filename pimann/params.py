@@ -168,6 +168,17 @@ class EvaluateParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class SimulateRun:
+    """One rollout the simulate stage runs: results/rollouts/<model>/<seed>/<scenario>-<...>.h5."""
+
+    model: str  # rollout folder: w<pi weight> or baseline
+    seed: int
+    scenario: str
+    steering: bool
+    video: bool  # also render this run to results/sim/<name>.mp4
+
+
+@dataclasses.dataclass(frozen=True)
 class SimulateParams:
     """simulate: MuJoCo model, footsteps, DCM/ZMP adjustment, whole-body QP IK (SPEC 9)."""
 
@@ -203,6 +214,11 @@ class SimulateParams:
     posture_cost: float  # weight of the generated joints in the IK
     ik_solver: str
     fall_height: float  # m, base below this = fall
+    output_rate_hz: float  # traces written at most this often (small enough to commit)
+    video_every_n: int  # video: every n-th trace sample, played in real time
+    video_width: int
+    video_height: int
+    runs: list[SimulateRun]  # the simulate stage's runs
 
 
 @dataclasses.dataclass(frozen=True)

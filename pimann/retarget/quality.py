@@ -128,3 +128,26 @@ def _spread(values: np.ndarray) -> dict[str, float]:
         "median": float(np.median(values)),
         "p95": float(np.percentile(values, 95)),
     }
+
+
+def quality_report(quality: dict) -> str:
+    """The SPEC 3.1 figures as a short text table, for people reading the stage's output."""
+    lines = [f"{'segment':<16}{'median deg':>11}{'p95 deg':>9}"]
+    for segment, error in quality["orientation_error_deg"].items():
+        lines.append(f"{segment:<16}{error['median']:>11.2f}{error['p95']:>9.2f}")
+    limits = quality["joint_at_limit_share"]
+    worst = max((k for k in limits if k != "any"), key=limits.get)
+    lines += [
+        f"frames with any joint at a limit: {limits['any']:.1%} (worst {worst} {limits[worst]:.1%})",
+        "stance-foot horizontal speed: median {median:.4f}, p95 {p95:.4f} m/s".format(
+            **quality["stance_foot_speed_m_s"]
+        ),
+        "fastest stance corner speed: median {median:.4f}, p95 {p95:.4f} m/s".format(
+            **quality["stance_corner_speed_m_s"]
+        ),
+        f"frames with a sole corner below the floor: {quality['corner_below_floor_share']:.2%}",
+        f"leg self-collision frames: {quality['leg_collision_share']:.2%}",
+        f"robot/human base speed ratio: {quality['speed_ratio']:.2f}",
+        f"{quality['ms_per_frame']:.2f} ms per frame",
+    ]
+    return "\n".join(lines)
