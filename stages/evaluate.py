@@ -9,34 +9,29 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.errors import PimannError
 from pimann.evaluate import cpu_workers, evaluate_all
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.stage import stage_entry
 
 log = logging.getLogger("evaluate")
 
 
-def main(argv: list[str] | None = None) -> int:
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    try:
-        params = load_params()
-        started = time.perf_counter()
-        claims = evaluate_all(
-            REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers)
-        )
-        for claim in claims:
-            log.info("%s %s: %s", claim.id, claim.status, claim.claim)
-        log.info("profile %s: evaluated in %.0f s", params.profile, time.perf_counter() - started)
-    except PimannError as error:
-        print(error, file=sys.stderr)
-        return 1
-    return 0
+    params = load_params()
+    started = time.perf_counter()
+    claims = evaluate_all(
+        REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers)
+    )
+    for claim in claims:
+        log.info("%s %s: %s", claim.id, claim.status, claim.claim)
+    log.info("profile %s: evaluated in %.0f s", params.profile, time.perf_counter() - started)
 
 
 if __name__ == "__main__":

@@ -10,35 +10,30 @@ import logging
 import sys
 from pathlib import Path
 
-from pimann.errors import PimannError
 from pimann.features import VARIANTS, build_dataset, write_dataset
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.stage import stage_entry
 from pimann.trajectory import iter_collection
 
 log = logging.getLogger("features")
 
 
-def main() -> int:
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    try:
-        params = load_params().features
-        source = REPO_ROOT / params.input
-        clips = list(iter_collection(source))
-        log.info("%d clips from %s, window %s", len(clips), source, params.window)
-        for variant in VARIANTS:
-            dataset = build_dataset(clips, params, variant)
-            path = REPO_ROOT / Path(params.output_dir) / f"{variant}.h5"
-            write_dataset(path, dataset)
-            log.info(
-                "%s: %d train samples (%d clips), %d test samples (%d clips) -> %s",
-                variant, len(dataset.x_train), len(dataset.train_clips),
-                len(dataset.x_test), len(dataset.test_clips), path,
-            )  # fmt: skip
-    except PimannError as error:
-        print(error, file=sys.stderr)
-        return 1
-    return 0
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
+    params = load_params().features
+    source = REPO_ROOT / params.input
+    clips = list(iter_collection(source))
+    log.info("%d clips from %s, window %s", len(clips), source, params.window)
+    for variant in VARIANTS:
+        dataset = build_dataset(clips, params, variant)
+        path = REPO_ROOT / Path(params.output_dir) / f"{variant}.h5"
+        write_dataset(path, dataset)
+        log.info(
+            "%s: %d train samples (%d clips), %d test samples (%d clips) -> %s",
+            variant, len(dataset.x_train), len(dataset.train_clips),
+            len(dataset.x_test), len(dataset.test_clips), path,
+        )  # fmt: skip
 
 
 if __name__ == "__main__":

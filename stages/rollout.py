@@ -15,33 +15,28 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.errors import PimannError
 from pimann.evaluate import cpu_workers, run_rollouts
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.stage import stage_entry
 
 log = logging.getLogger("rollout")
 
 
-def main(argv: list[str] | None = None) -> int:
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--models", type=Path, required=True, help="a training output folder")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--workers", type=int, default=2)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    try:
-        params = load_params()
-        started = time.perf_counter()
-        written = run_rollouts(
-            REPO_ROOT / args.models, REPO_ROOT / args.out, params, cpu_workers(args.workers)
-        )
-        log.info("profile %s: %d rollouts -> %s in %.0f s", params.profile, len(written),
-                 args.out, time.perf_counter() - started)  # fmt: skip
-    except PimannError as error:
-        print(error, file=sys.stderr)
-        return 1
-    return 0
+    params = load_params()
+    started = time.perf_counter()
+    written = run_rollouts(
+        REPO_ROOT / args.models, REPO_ROOT / args.out, params, cpu_workers(args.workers)
+    )
+    log.info("profile %s: %d rollouts -> %s in %.0f s", params.profile, len(written),
+             args.out, time.perf_counter() - started)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -16,45 +16,40 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.errors import PimannError
 from pimann.features import VARIANTS
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.stage import stage_entry
 from pimann.train import pick_device, train_models
 
 log = logging.getLogger("train")
 
 
-def main(argv: list[str] | None = None) -> int:
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pi-weight", type=float, required=True)
     parser.add_argument("--variant", choices=VARIANTS, default="full")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--plots", type=Path, required=True)
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s %(message)s")
-    try:
-        params = load_params()
-        dataset = REPO_ROOT / params.features.output_dir / f"{args.variant}.h5"
-        device = pick_device(params.train.device)
-        log.info(
-            "profile %s: w=%g, seeds %s, %d epochs on %s, data %s",
-            params.profile, args.pi_weight, params.train.seeds, params.train.epochs,
-            device, dataset,
-        )  # fmt: skip
-        started = time.perf_counter()
-        metas = train_models(
-            dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
-            device, plots_dir=REPO_ROOT / args.plots,
-        )  # fmt: skip
-        for seed, meta in metas.items():
-            log.info("seed %d: best epoch %d, test loss %.5f", seed, meta["best_epoch"],
-                     meta["best_test_loss"])  # fmt: skip
-        log.info("trained in %.0f s", time.perf_counter() - started)
-    except PimannError as error:
-        print(error, file=sys.stderr)
-        return 1
-    return 0
+    params = load_params()
+    dataset = REPO_ROOT / params.features.output_dir / f"{args.variant}.h5"
+    device = pick_device(params.train.device)
+    log.info(
+        "profile %s: w=%g, seeds %s, %d epochs on %s, data %s",
+        params.profile, args.pi_weight, params.train.seeds, params.train.epochs,
+        device, dataset,
+    )  # fmt: skip
+    started = time.perf_counter()
+    metas = train_models(
+        dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
+        device, plots_dir=REPO_ROOT / args.plots,
+    )  # fmt: skip
+    for seed, meta in metas.items():
+        log.info("seed %d: best epoch %d, test loss %.5f", seed, meta["best_epoch"],
+                 meta["best_test_loss"])  # fmt: skip
+    log.info("trained in %.0f s", time.perf_counter() - started)
 
 
 if __name__ == "__main__":
