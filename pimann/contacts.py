@@ -160,9 +160,16 @@ def trajectory_configurations(robot: Robot, trajectory: Trajectory) -> np.ndarra
 
 
 def foot_kinematics(
-    robot: Robot, configurations: np.ndarray, velocities: np.ndarray | None = None
+    robot: Robot,
+    configurations: np.ndarray,
+    velocities: np.ndarray | None = None,
+    reference: pin.ReferenceFrame = pin.LOCAL_WORLD_ALIGNED,
 ) -> FootKinematics:
-    """Sole placements (and, given v (T, nv), LOCAL_WORLD_ALIGNED sole velocities) per frame.
+    """Sole placements (and, given v (T, nv), sole velocities in `reference`) per frame.
+
+    LOCAL_WORLD_ALIGNED: the sole origin's velocity in world axes; WORLD: the inertial-fixed
+    (spatial) velocity the authors' code used, whose linear part is that of the point at the
+    world origin.
 
     One pinocchio forward pass per frame, updating only the two sole frames (~3 us a frame).
     """
@@ -183,9 +190,7 @@ def foot_kinematics(
             positions[k, f] = placement.translation
             rotations[k, f] = placement.rotation
             if out_velocities is not None:
-                out_velocities[k, f] = pin.getFrameVelocity(
-                    model, data, frame_id, pin.LOCAL_WORLD_ALIGNED
-                ).vector
+                out_velocities[k, f] = pin.getFrameVelocity(model, data, frame_id, reference).vector
     return FootKinematics(positions, rotations, out_velocities)
 
 

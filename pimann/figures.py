@@ -317,7 +317,17 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     if not runs:
         log.info("joint_tracking: no simulation traces under %s, skipped", results.root / "sim")
         return None
-    path, data = next(((p, d) for p, d in runs if "mixed" in p.stem), runs[0])
+    # the paper's run: the featured PI model's steered mixed scenario, else any mixed run
+    featured = f"w{figures.pi_weight:g}-"
+    mixed = [(p, d) for p, d in runs if "mixed" in p.stem]
+    path, data = next(
+        (
+            (p, d)
+            for p, d in mixed
+            if p.stem.startswith(featured) and p.stem.endswith("mixed-steering")
+        ),
+        (mixed or runs)[0],
+    )
     names = list(data["names"])
     joints = [j for j in TRACKED_JOINTS if j in names] or names[:4]
     fig, axes = _figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)

@@ -6,10 +6,13 @@ inertial frame; summed over the trajectory per foot; left and right sums average
 RMSE"). The sum grows with the number of frames, so it compares trajectories of equal length
 and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported beside it.
 
-Sole velocities are pinocchio frame velocities (LOCAL_WORLD_ALIGNED: the velocity of the sole
-origin and the sole's angular velocity, both in world axes) with the base velocity from
-central finite differences of q on the configuration manifold (`pinocchio.difference`) and the
-joint velocities from the file when it has them (else the same differences).
+Sole velocities are pinocchio frame velocities in `evaluate.foot_velocity_frame`: by default
+LOCAL_WORLD_ALIGNED (the velocity of the sole origin and the sole's angular velocity, both in
+world axes: the paper's "foot velocity in the inertial frame"), or WORLD (inertial-fixed, as the
+authors' code computed it with iDynTree; its linear part grows with the distance from the
+origin), with the base velocity from central finite differences of q on the configuration
+manifold (`pinocchio.difference`) and the joint velocities from the file when it has them
+(else the same differences).
 
 Foot-skating ratio (motion-generation convention, defined at 20 fps): the trajectory's sole
 positions and lowest-corner heights are linearly interpolated to `skating_rate_hz`; a pair of
@@ -47,6 +50,10 @@ from pimann.robot import Robot, load_robot
 from pimann.trajectory import Trajectory, iter_collection, read_trajectory
 
 SIDES = ("left", "right")
+FOOT_VELOCITY_FRAMES = {
+    "local_world_aligned": pin.LOCAL_WORLD_ALIGNED,  # the paper's text
+    "world": pin.WORLD,  # the authors' code (inertial-fixed)
+}
 
 
 def manifold_velocities(model: pin.Model, configurations: np.ndarray, time: np.ndarray):
@@ -164,7 +171,8 @@ def _analyse(trajectory: Trajectory, robot: Robot, params: EvaluateParams) -> _A
     if trajectory.joint_velocities is not None:
         velocities[:, robot.v_index] = trajectory.joint_velocities
         joint_source = "file"
-    feet = foot_kinematics(robot, configurations, velocities)
+    reference = FOOT_VELOCITY_FRAMES[params.foot_velocity_frame]
+    feet = foot_kinematics(robot, configurations, velocities, reference)
     if trajectory.contacts is not None:
         contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
     else:

@@ -165,6 +165,7 @@ class EvaluateParams:
     skating_speed_per_frame: float  # m, ... moving more than this per frame ...
     skating_rate_hz: float  # ... at this frame rate
     walk_distance: float  # m, forward base travel that counts as walking
+    foot_velocity_frame: Literal["local_world_aligned", "world"]  # sole velocities for the RMSE
 
 
 @dataclasses.dataclass(frozen=True)

@@ -362,7 +362,8 @@ class _Scene:
             yield self.draw(n)
 
 
-def _check_output(path: Path) -> str:
+def check_output(path: Path) -> str:
+    """The picture format of `path` (.gif, .mp4, .png), or a PimannError naming the file."""
     suffix = path.suffix.lower()
     if suffix not in FORMATS:
         raise PimannError(
@@ -402,6 +403,18 @@ def _write_mp4(path: Path, frames: Iterator[np.ndarray], fps: float) -> None:
             writer.append_data(frame)
 
 
+def write_pictures(output_path: Path, pictures: Iterator[np.ndarray], fps: float) -> None:
+    """Pictures to a .png strip, a .gif or an .mp4 (by the suffix), written atomically."""
+    suffix = check_output(output_path)
+    with atomic_path(output_path) as tmp:
+        if suffix == ".png":
+            _write_strip(tmp, list(pictures))
+        elif suffix == ".gif":
+            _write_gif(tmp, pictures, fps)
+        else:
+            _write_mp4(tmp, pictures, fps)
+
+
 def render_trajectory(
     trajectory: Trajectory | None,
     output_path: str | Path,
@@ -421,7 +434,7 @@ def render_trajectory(
     `human` may be at another rate: frames are matched by time. Either subject may be None.
     """
     output_path = Path(output_path)
-    suffix = _check_output(output_path)
+    suffix = check_output(output_path)
     if trajectory is None and human is None:
         raise PimannError(output_path, "nothing to render: no trajectory and no human motion")
     if width < 64 or height < 64 or every_n_frames < 1 or strip_frames < 1:
@@ -448,14 +461,7 @@ def render_trajectory(
         rate = (len(clock) - 1) / duration if duration > 0 else 25.0
         fps = rate / every_n_frames
     log.info("rendering %d frames of %s to %s", len(frames), source, output_path)
-    with atomic_path(output_path) as tmp:
-        pictures = scene.frames(len(frames), output_path.name)
-        if suffix == ".png":
-            _write_strip(tmp, list(pictures))
-        elif suffix == ".gif":
-            _write_gif(tmp, pictures, fps)
-        else:
-            _write_mp4(tmp, pictures, fps)
+    write_pictures(output_path, scene.frames(len(frames), output_path.name), fps)
     return output_path
 
 

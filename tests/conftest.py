@@ -5,12 +5,35 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pimann.params import EvaluateParams, SimulateParams, load_params
 from pimann.robot import Robot, load_robot
+
+# The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
+EVALUATE_PARAMS = EvaluateParams(
+    contact_on_height=0.02,
+    contact_off_height=0.02,
+    contact_switch_time=0.04,
+    skating_height=0.05,
+    skating_speed_per_frame=0.025,
+    skating_rate_hz=20.0,
+    walk_distance=1.0,
+    foot_velocity_frame="local_world_aligned",
+)
 
 
 @pytest.fixture(scope="session")
 def robot() -> Robot:
     return load_robot("retarget")
+
+
+@pytest.fixture(scope="session")
+def sim_robot() -> Robot:
+    return load_robot("simulation")
+
+
+@pytest.fixture(scope="session")
+def sim_params() -> SimulateParams:
+    return load_params().simulate
 
 
 @pytest.fixture

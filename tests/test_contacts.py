@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
+from conftest import EVALUATE_PARAMS
 
 from pimann.contacts import (
     FEET,
@@ -20,15 +21,7 @@ from pimann.params import EvaluateParams
 from pimann.robot import CONTACT_CORNERS
 from pimann.trajectory import Trajectory
 
-PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
-    skating_height=0.05,
-    skating_speed_per_frame=0.025,
-    skating_rate_hz=20.0,
-    walk_distance=1.0,
-)
+PARAMS = EVALUATE_PARAMS
 DT = 0.02  # 50 Hz
 
 

@@ -7,7 +7,7 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from conftest import EVALUATE_PARAMS, random_configuration
 
 from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
 from pimann.errors import PimannError
@@ -22,15 +22,7 @@ from pimann.params import EvaluateParams
 from pimann.robot import JOINT_NAMES
 from pimann.trajectory import Trajectory, write_collection, write_trajectory
 
-PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
-    skating_height=0.05,
-    skating_speed_per_frame=0.025,
-    skating_rate_hz=20.0,
-    walk_distance=1.0,
-)
+PARAMS = EVALUATE_PARAMS
 RATE = 50.0
 FRAMES = 150
 SQRT3 = np.sqrt(3.0)
@@ -148,6 +140,17 @@ def test_turning_foot_counts_in_angular_rmse(robot):
     metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS)
     assert metrics["support_rmse_angular_left"] == pytest.approx(FRAMES * spin / SQRT3, rel=1e-3)
     assert metrics["support_rmse_linear_left"] < 0.05  # vs 43 rad/s-frames of turning
+
+
+def test_world_representation_is_the_velocity_at_the_origin(robot):
+    """The authors' inertial-fixed sole velocity: a sole turning in place at p reads -w x p."""
+    spin = 0.5
+    world = EvaluateParams(**{**vars(PARAMS), "foot_velocity_frame": "world"})
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, world)
+    lever = np.hypot(0.3, 0.2)  # the sole stands at (0.3, -0.2, 0)
+    expected = FRAMES * spin * lever / SQRT3
+    assert metrics["support_rmse_linear_left"] == pytest.approx(expected, rel=2e-3)
+    assert metrics["support_rmse_angular_left"] == pytest.approx(FRAMES * spin / SQRT3, rel=1e-3)
 
 
 def test_still_foot_residual_is_second_order_in_the_frame_period(robot):

@@ -8,21 +8,10 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.params import load_params
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, load_robot
+from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback
-
-
-@pytest.fixture(scope="module")
-def params():
-    return load_params().simulate
-
-
-@pytest.fixture(scope="module")
-def sim_robot():
-    return load_robot("simulation")
 
 
 def test_feedback_law_closed_form():
@@ -47,10 +36,10 @@ def test_low_pass_step_response():
     np.testing.assert_allclose(lowpass(np.full(2, np.nan)), out)  # no contact: hold
 
 
-def test_ik_tracks_feet_and_com(sim_robot, params):
+def test_ik_tracks_feet_and_com(sim_robot, sim_params):
     """A few ticks toward shifted targets: feet and CoM land on them (pinocchio FK)."""
-    q0 = standing_pose(sim_robot, params)
-    ik = WholeBodyIK(sim_robot, params, q0)
+    q0 = standing_pose(sim_robot, sim_params)
+    ik = WholeBodyIK(sim_robot, sim_params, q0)
     left = sim_robot.frame_placement(q0, LEFT_SOLE)
     right = sim_robot.frame_placement(q0, RIGHT_SOLE)
     lifted = pin.SE3(left.rotation, left.translation + [0.01, 0.0, 0.01])
@@ -66,12 +55,12 @@ def test_ik_tracks_feet_and_com(sim_robot, params):
     np.testing.assert_allclose(pin.centerOfMass(sim_robot.model, sim_robot.data, q), com, atol=1e-4)
 
 
-def test_closed_loop_stepping_keeps_balance(sim_robot, params):
+def test_closed_loop_stepping_keeps_balance(sim_robot, sim_params):
     """Four steps of 0.05 m (0.1 m at 0.5x step size) in MuJoCo: no fall, no slip."""
     fast = dataclasses.replace(
-        params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=1.0, end_hold_s=0.5
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=1.0, end_hold_s=0.5
     )
-    feet = standing_feet(sim_robot, standing_pose(sim_robot, params))
+    feet = standing_feet(sim_robot, standing_pose(sim_robot, sim_params))
     plan = stepping_plan(feet, steps=4, step=0.1, start=0.3, end=0.3)
     trajectory = stepping_trajectory(sim_robot, fast, plan)
     result = simulate_trajectory(trajectory, fast)
@@ -91,11 +80,11 @@ def test_closed_loop_stepping_keeps_balance(sim_robot, params):
     assert summary["final_sole_error_m"] < 0.015
 
 
-def test_paper_scaling_turning_walk(sim_robot, params):
-    """Default params (0.33x speed, 0.4x steps, 1.6 s hold) on a quick turning walk."""
-    feet = standing_feet(sim_robot, standing_pose(sim_robot, params))
+def test_paper_scaling_turning_walk(sim_robot, sim_params):
+    """Default sim_params (0.33x speed, 0.4x steps, 1.6 s hold) on a quick turning walk."""
+    feet = standing_feet(sim_robot, standing_pose(sim_robot, sim_params))
     plan = stepping_plan(feet, 4, (0.3, 0.0, 0.3), single=0.35, double=0.1, start=0.2, end=0.2)
-    result = simulate_trajectory(stepping_trajectory(sim_robot, params, plan), params)
+    result = simulate_trajectory(stepping_trajectory(sim_robot, sim_params, plan), sim_params)
     assert not result.fallen and result.foot_slip < 0.01
     # the robot turned with the plan: final sole yaw from the simulation's sole positions
     left, right = result.soles_final[0, :2], result.soles_final[1, :2]

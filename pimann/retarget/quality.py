@@ -138,7 +138,8 @@ def quality_report(quality: dict) -> str:
     limits = quality["joint_at_limit_share"]
     worst = max((k for k in limits if k != "any"), key=limits.get)
     lines += [
-        f"frames with any joint at a limit: {limits['any']:.1%} (worst {worst} {limits[worst]:.1%})",
+        f"frames with any joint at a limit: {limits['any']:.1%}"
+        f" (worst {worst} {limits[worst]:.1%})",
         "stance-foot horizontal speed: median {median:.4f}, p95 {p95:.4f} m/s".format(
             **quality["stance_foot_speed_m_s"]
         ),

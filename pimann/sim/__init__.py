@@ -6,4 +6,13 @@ dcm: offline DCM/ZMP adjustment over the whole horizon (casadi).
 wbc: whole-body QP IK (pink + daqp) and the ZMP-CoM feedback law.
 run: the closed loop, `simulate_trajectory(trajectory, params) -> SimulationResult`.
 synthetic: a kinematic stepping trajectory for tests and benchmarks.
+results: a run written to (and read from) HDF5, the ZMP-outside-the-support figure.
+video: offscreen MuJoCo rendering of a run (stick-figure fallback without OpenGL).
 """
+
+import os
+
+# MuJoCo picks its OpenGL backend when first imported: headless, EGL is the one that works
+# here (OSMesa does not). A display or an explicit MUJOCO_GL keeps the user's choice.
+if "DISPLAY" not in os.environ:
+    os.environ.setdefault("MUJOCO_GL", "egl")

@@ -132,14 +132,14 @@ class SimModel:
         return np.array([x, y]), float(force[2])
 
 
-def _urdf_text() -> str:
+def _urdf_text(visual: bool = False) -> str:
     path = robots_dir() / MODEL_FILES["simulation"]
     if not path.is_file():
         raise PimannError(path, "simulation model not found (set PIMANN_SHARED?)")
     mesh_dir = robots_dir() / "ergoCub" / "meshes" / "simmechanics"
     compiler = (
         f'<mujoco><compiler meshdir="{mesh_dir}" strippath="true" balanceinertia="true" '
-        'discardvisual="true"/></mujoco>'
+        f'discardvisual="{str(not visual).lower()}"/></mujoco>'
     )
     text, count = re.subn(
         r"(<robot\b[^>]*>)", lambda m: m.group(1) + compiler, path.read_text(), count=1
@@ -149,9 +149,12 @@ def _urdf_text() -> str:
     return text
 
 
-def build_sim_model(params: SimulateParams) -> SimModel:
-    """The MuJoCo ergoCub with a free base, a floor, and position actuators on the 26 joints."""
-    spec = mujoco.MjSpec.from_string(_urdf_text())
+def build_sim_model(params: SimulateParams, visual: bool = False) -> SimModel:
+    """The MuJoCo ergoCub with a free base, a floor, and position actuators on the 26 joints.
+
+    `visual` keeps the URDF's meshes for rendering (replaying states, not for simulating).
+    """
+    spec = mujoco.MjSpec.from_string(_urdf_text(visual))
     spec.option.timestep = params.timestep
     spec.option.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     for joint in list(spec.joints):
@@ -165,6 +168,15 @@ def build_sim_model(params: SimulateParams) -> SimModel:
         size=[0.0, 0.0, 0.05],
         friction=[params.friction, 0.005, 0.0001],
     )
+    if visual:  # a checkered floor shows the walk's progress on video
+        spec.add_texture(
+            name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
+            builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
+            rgb1=[0.45, 0.5, 0.55], rgb2=[0.65, 0.7, 0.75], width=64, height=64,
+        )  # fmt: skip
+        material = spec.add_material(name="grid", texrepeat=[4.0, 4.0], texuniform=True)
+        material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
+        spec.geom("floor").material = "grid"
     for geom in spec.geoms:
         if geom.name != "floor":
             geom.friction = [params.friction, 0.005, 0.0001]

@@ -32,6 +32,7 @@ from pimann.trajectory import Trajectory
 
 TRACE_KEYS = (
     "t", "ref", "meas", "gen", "com_ref", "com", "zmp_ref", "zmp", "h", "ik", "soles", "soles_ref",
+    "base", "forces", "com_world",
 )  # fmt: skip
 SETTLE_S = 0.05  # s after touchdown before a stance foot's position is taken as its anchor
 log = logging.getLogger(__name__)
@@ -60,6 +61,10 @@ class SimulationResult:
     soles_reference: np.ndarray  # (K, 2, 3) where the footstep plan has them
     footsteps: FootstepPlan  # the plan that was tracked (for figures: support polygons)
     dcm: DCMPlan
+    base_pose: np.ndarray  # (K, 7) simulated base position and quaternion (x y z w), world
+    foot_forces: np.ndarray  # (K, 2) floor's normal force on the left / right foot, N
+    com_world: np.ndarray  # (K, 3) simulated CoM in the simulation's world (no drift removed)
+    foot_slip_per_foot: np.ndarray  # (2,) m, foot_slip of the left / right foot
 
     @property
     def soles_final(self) -> np.ndarray:
@@ -141,7 +146,7 @@ def simulate_plan(
     drift = LowPass(params.zmp_filter_hz, dt, np.zeros(2))
     trace: dict[str, list] = {k: [] for k in TRACE_KEYS}
     anchors: dict[tuple[int, int], np.ndarray] = {}
-    slip = 0.0
+    slip = np.zeros(2)
     fall_time = None
     start = clock.perf_counter()
     for tick in range(ticks):
@@ -190,12 +195,13 @@ def simulate_plan(
             if k is None or not (settled or plan.feet[side].t_on[k] == 0.0):
                 continue
             anchor = anchors.setdefault((side, k), soles[side, :2].copy())
-            slip = max(slip, float(np.linalg.norm(soles[side, :2] - anchor)))
+            slip[side] = max(slip[side], float(np.linalg.norm(soles[side, :2] - anchor)))
         com_after, _, zmp_ref_after = dcm.at(t + dt)
         values = (
             t + dt, joints, sim.joints(data), generated, com_after,
             sim.com(data) - np.append(drift.value, 0.0), zmp_ref_after,
             zmp_filter.value - drift.value, sim.base_height(data), ik_error, soles, planned,
+            np.concatenate([data.qpos[:3], np.roll(data.qpos[3:7], -1)]), load, sim.com(data),
         )  # fmt: skip
         for key, value in zip(TRACE_KEYS, values, strict=True):
             trace[key].append(value)
@@ -217,7 +223,7 @@ def simulate_plan(
         zmp_measured=arrays["zmp"],
         base_height=arrays["h"],
         ik_error=arrays["ik"],
-        foot_slip=slip,
+        foot_slip=float(slip.max()),
         fallen=fall_time is not None,
         fall_time=fall_time,
         real_time_factor=simulated / max(wall, 1e-9),
@@ -226,6 +232,10 @@ def simulate_plan(
         soles_reference=arrays["soles_ref"],
         footsteps=plan,
         dcm=dcm,
+        base_pose=arrays["base"],
+        foot_forces=arrays["forces"],
+        com_world=arrays["com_world"],
+        foot_slip_per_foot=slip,
     )
 
 

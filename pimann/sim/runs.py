@@ -1,0 +1,100 @@
+"""The simulate stage's work: chosen rollouts walked in MuJoCo, one result file each, a summary.
+
+results/sim/<model>-<seed>-<scenario>-<steering|nosteering>.h5   (pimann.sim.results)
+results/sim/<same name>.mp4                                       (runs marked `video`)
+summary JSON: per run the summary figures, plus the profile and the params used
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+from pimann.atomic import atomic_path, write_text_atomic
+from pimann.errors import PimannError
+from pimann.evaluate import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.params import Params, SimulateRun, as_dict
+from pimann.paths import REPO_ROOT
+from pimann.sim.results import write_simulation
+from pimann.sim.run import simulate_trajectory
+from pimann.sim.video import render_simulation
+from pimann.trajectory import read_trajectory
+
+log = logging.getLogger(__name__)
+
+
+def run_name(run: SimulateRun) -> str:
+    return f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+
+
+def _json_ready(value: Any) -> Any:
+    """NaN and infinities as null (strict JSON), numpy scalars as Python numbers."""
+    if isinstance(value, dict):
+        return {k: _json_ready(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_ready(v) for v in value]
+    if hasattr(value, "item"):
+        value = value.item()
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
+
+
+def simulate_runs(
+    rollouts_dir: str | Path, out_dir: str | Path, summary_path: str | Path, params: Params
+) -> dict[str, Any]:
+    """Walk every run of `params.simulate.runs`; write `out_dir` (whole) and the summary JSON.
+
+    Every rollout is checked to exist before minutes of simulation start.
+    """
+    sim = params.simulate
+    if not sim.runs:
+        raise PimannError(None, "simulate.runs is empty: nothing to simulate")
+    jobs = []
+    for run in sim.runs:
+        key = RolloutKey(run.model, run.seed, run.scenario, run.steering)
+        path = rollout_path(rollouts_dir, key)
+        if not path.is_file():
+            raise PimannError(path, "rollout not found (run the rollout stage first)")
+        jobs.append((run, path))
+    runs: dict[str, Any] = {}
+    with atomic_path(out_dir) as tmp:
+        tmp.mkdir()
+        for k, (run, path) in enumerate(jobs):
+            name = run_name(run)
+            trajectory = read_trajectory(path)
+            log.info("[%d/%d] %s: %.1f s generated", k + 1, len(jobs), name, trajectory.time[-1])
+            result = simulate_trajectory(trajectory, sim)
+            provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
+                          "steering": run.steering, "rollout": _relative(path)}  # fmt: skip
+            summary = write_simulation(
+                tmp / f"{name}.h5", result, sim, source=_relative(path),
+                rate_hz=sim.output_rate_hz, attrs=provenance,
+            )  # fmt: skip
+            log.info(
+                "%s: success %s, %d steps, walked %.2f m of %.2f m, joint RMSE %.4f rad, ZMP "
+                "outside %.3f m, slip %.4f m, RTF %.1fx", name, summary["success"],
+                summary["steps"], summary["distance_walked_m"], summary["distance_planned_m"],
+                summary["joint_rmse_rad"], summary["zmp_outside_max_m"] or 0.0,
+                summary["foot_slip_m"], summary["real_time_factor"],
+            )  # fmt: skip
+            if run.video:
+                render_simulation(
+                    read_trajectory(tmp / f"{name}.h5"), tmp / f"{name}.mp4", sim,
+                    every_n_frames=sim.video_every_n, width=sim.video_width,
+                    height=sim.video_height,
+                )  # fmt: skip
+            runs[name] = {**provenance, **summary}
+    record = {"profile": params.profile, "runs": runs, "params": {"simulate": as_dict(sim)}}
+    record = _json_ready(record)
+    write_text_atomic(summary_path, json.dumps(record, indent=2) + "\n")
+    return record
+
+
+def _relative(path: Path) -> str:
+    """A rollout's path as recorded in results: relative to the repository when inside it."""
+    path = Path(path).resolve()
+    return str(path.relative_to(REPO_ROOT)) if path.is_relative_to(REPO_ROOT) else str(path)
