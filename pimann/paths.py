@@ -9,8 +9,23 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_ENV = "PIMANN_SHARED"
+PACKAGE_CHECKOUT = Path(__file__).resolve().parents[1]
+
+
+def project_root(start: Path | None = None) -> Path:
+    """The pimann project being worked in: the nearest folder at or above `start` (default:
+    the current one, where DVC runs every stage) that holds params.yaml and dvc.yaml; else
+    the checkout this package was installed from. A second clone thus never writes into the
+    first one's outputs."""
+    start = (start or Path.cwd()).resolve()
+    for folder in (start, *start.parents):
+        if (folder / "params.yaml").is_file() and (folder / "dvc.yaml").is_file():
+            return folder
+    return PACKAGE_CHECKOUT
+
+
+REPO_ROOT = project_root()
 
 
 def shared_dir() -> Path:

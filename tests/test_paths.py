@@ -1,0 +1,26 @@
+"""Where the project and the shared data are found."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from pimann.paths import PACKAGE_CHECKOUT, SHARED_ENV, project_root, shared_dir
+
+
+def test_project_root_is_found_from_the_working_folder(tmp_path):
+    (tmp_path / "params.yaml").write_text("profile: quick\n")
+    (tmp_path / "dvc.yaml").write_text("stages: {}\n")
+    (tmp_path / "stages").mkdir()
+    assert project_root(tmp_path / "stages") == tmp_path.resolve()
+
+
+def test_project_root_falls_back_to_the_package_checkout(tmp_path):
+    assert project_root(tmp_path) == PACKAGE_CHECKOUT
+
+
+def test_shared_dir_follows_the_setting(monkeypatch, tmp_path):
+    monkeypatch.setenv(SHARED_ENV, str(tmp_path))
+    assert shared_dir() == tmp_path.resolve()
+    monkeypatch.delenv(SHARED_ENV)
+    assert shared_dir().name == "shared" and (shared_dir() / "robots").is_dir()
+    assert Path(shared_dir()).parent == project_root().parent
