@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from pimann.paths import PACKAGE_CHECKOUT, SHARED_ENV, project_root, shared_dir
 
 
@@ -23,4 +21,4 @@ def test_shared_dir_follows_the_setting(monkeypatch, tmp_path):
     assert shared_dir() == tmp_path.resolve()
     monkeypatch.delenv(SHARED_ENV)
     assert shared_dir().name == "shared" and (shared_dir() / "robots").is_dir()
-    assert Path(shared_dir()).parent == project_root().parent
+    assert shared_dir() == (project_root().parent / "shared").resolve()
