@@ -35,6 +35,7 @@ from pimann.atomic import atomic_path
 from pimann.errors import PimannError
 from pimann.params import FeaturesParams
 from pimann.robot import N_JOINTS
+from pimann.rotations import yaw_only
 from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -172,16 +173,6 @@ def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> Featu
         return tuple(int(round(s * rate_hz)) for s in seconds)
 
     return FeatureLayout(frames(window.input_s), frames(window.output_s), rate_hz, variant)
-
-
-def yaw_only(rotations: np.ndarray) -> np.ndarray:
-    """Rz(yaw) of each rotation: the ground projection (roll and pitch set to 0)."""
-    yaw = np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0])
-    c, s = np.cos(yaw), np.sin(yaw)
-    out = np.zeros_like(rotations)
-    out[:, 0, 0], out[:, 0, 1], out[:, 1, 0], out[:, 1, 1] = c, -s, s, c
-    out[:, 2, 2] = 1.0
-    return out
 
 
 def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:

@@ -59,7 +59,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann.contacts import FEET, SchmittTrigger
 from pimann.errors import PimannError
-from pimann.features import FeatureLayout, Normalisation, matrix_to_rpy, yaw_only
+from pimann.features import FeatureLayout, Normalisation, matrix_to_rpy
 from pimann.params import (
     DEFAULT_PARAMS,
     EvaluateParams,
@@ -77,7 +77,8 @@ from pimann.robot import (
     Robot,
     load_robot,
 )
-from pimann.steering import goal_from_command, rotation_rpy, steer, yaw_of
+from pimann.rotations import yaw_of, yaw_only
+from pimann.steering import goal_from_command, rotation_rpy, steer
 from pimann.trajectory import Trajectory, write_trajectory
 
 log = logging.getLogger(__name__)

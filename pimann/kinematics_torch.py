@@ -14,6 +14,7 @@ from __future__ import annotations
 from typing import NamedTuple
 
 import numpy as np
+import pinocchio as pin
 import torch
 from torch import nn
 
@@ -48,10 +49,6 @@ def rpy_to_matrix(rpy: torch.Tensor) -> torch.Tensor:
         (-sp, cp * sr, cp * cr),
     )
     return torch.stack([torch.stack(row, -1) for row in rows], -2)
-
-
-def _skew(v: np.ndarray) -> np.ndarray:
-    return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
 def _revolute_axis(robot: Robot, joint_id: int) -> np.ndarray:
@@ -116,7 +113,7 @@ class TorchKinematics(nn.Module):
                     raise PimannError(robot.urdf_path, f"joint {name!r} is not a study joint")
                 axis = _revolute_axis(robot, joint_id)
                 placement = model.jointPlacements[joint_id]
-                skew = _skew(axis)
+                skew = pin.skew(axis)
                 placement_rot[c, k] = placement.rotation
                 rot_k[c, k] = placement.rotation @ skew
                 rot_k2[c, k] = placement.rotation @ skew @ skew

@@ -27,7 +27,7 @@ from matplotlib.lines import Line2D
 from tqdm import tqdm
 
 from pimann.atomic import atomic_path
-from pimann.contacts import detect_contacts
+from pimann.contacts import detect_contacts, trajectory_configurations
 from pimann.errors import PimannError
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_human
@@ -133,12 +133,9 @@ def robot_skeleton(
 
     points = np.empty((len(frames), len(joint_ids) + len(leaves), 3))
     feet = np.empty((len(frames), 2, 4, 3))
+    configurations = trajectory_configurations(robot, trajectory)
     for n, t in enumerate(frames):
-        q = robot.configuration(
-            trajectory.base_position[t],
-            trajectory.base_quaternion_xyzw[t],
-            trajectory.joint_positions[t],
-        )
+        q = configurations[t]
         pin.forwardKinematics(model, data, q)
         for k, j in enumerate(joint_ids):
             points[n, k] = data.oMi[j].translation

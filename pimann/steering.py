@@ -16,6 +16,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from pimann.rotations import yaw_of
+
 
 def skew_part(matrices: np.ndarray) -> np.ndarray:
     """(A - A^T) / 2 over the last two axes."""
@@ -76,12 +78,6 @@ def steer(
     relative = np.swapaxes(np.asarray(R_desired, dtype=float), -1, -2) @ R  # R_d^T R
     angular = vee(skew_part(relative))
     return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - k1 * angular
-
-
-def yaw_of(R: np.ndarray) -> np.ndarray:
-    """Heading (rad) of rotation matrices (..., 3, 3): yaw of R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    R = np.asarray(R, dtype=float)
-    return np.arctan2(R[..., 1, 0], R[..., 0, 0])
 
 
 def rotation_rpy(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:

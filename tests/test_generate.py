@@ -30,7 +30,7 @@ from pimann.generate import (
 from pimann.mann import MANN
 from pimann.params import ModelParams, MotionSegment, StandSegment, load_params
 from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
-from pimann.steering import yaw_of
+from pimann.rotations import yaw_of
 from pimann.trajectory import read_trajectory
 
 LAYOUT = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, "full")

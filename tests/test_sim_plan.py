@@ -10,10 +10,11 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from pimann.errors import PimannError
+from pimann.rotations import rot_z
 from pimann.sim.dcm import lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import clean_contacts, extract_footsteps, relative
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
-from pimann.sim.wbc import SOLE_HEIGHT, standing_pose, yaw_rotation
+from pimann.sim.wbc import SOLE_HEIGHT, standing_pose
 
 
 @pytest.fixture(scope="module")
@@ -108,7 +109,7 @@ def _inside_support(plan, dcm, half, tolerance=1e-6):
         for side in np.flatnonzero(dcm.support[k]):
             centre, yaw = plan.foot_pose(side, t)
             box = np.array([[sx * half[0], sy * half[1]] for sx in (-1, 1) for sy in (-1, 1)])
-            corners.append(centre[:2] + box @ yaw_rotation(yaw)[:2, :2].T)
+            corners.append(centre[:2] + box @ rot_z(yaw)[:2, :2].T)
         corners = np.concatenate(corners)
         hull = ConvexHull(corners)
         assert np.all(hull.equations[:, :2] @ zmp + hull.equations[:, 2] <= tolerance), (k, t)

@@ -6,6 +6,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pimann.rotations import yaw_of
 from pimann.steering import (
     goal_from_command,
     hat,
@@ -14,7 +15,6 @@ from pimann.steering import (
     skew_part,
     steer,
     vee,
-    yaw_of,
 )
 
 K0, K1 = 0.2, 2.0

@@ -26,8 +26,8 @@ from pink.limits import ConfigurationLimit, Limit
 from pink.tasks import FrameTask, PostureTask, RelativeFrameTask
 
 from pimann.params import RetargetParams
-from pimann.retarget.targets import yaw_only
 from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot
+from pimann.rotations import yaw_only
 
 FEET = ("LeftFoot", "RightFoot")
 SHOULDER_ROLLS = ("l_shoulder_roll", "r_shoulder_roll")

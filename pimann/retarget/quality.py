@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
+from pimann.contacts import trajectory_configurations
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 from pimann.retarget.odometry import SOLE_CORNERS
@@ -44,12 +45,9 @@ def frame_measures(
     soles = np.empty((n, 2, 3))
     corners = np.empty((n, 2, len(SOLE_CORNERS), 3))
     shanks = np.empty((n, 2, 2, 3))
+    configurations = trajectory_configurations(robot, trajectory)
     for t in range(n):
-        q = robot.configuration(
-            trajectory.base_position[t],
-            trajectory.base_quaternion_xyzw[t],
-            trajectory.joint_positions[t],
-        )
+        q = configurations[t]
         pin.framesForwardKinematics(model, data, q)
         for k, frame in enumerate(segment_frames):
             rotations[t, k] = data.oMf[frame].rotation

@@ -21,22 +21,9 @@ import pinocchio as pin
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 from pimann.robot import JOINT_NAMES, SEGMENTS, Robot, load_robot
+from pimann.rotations import rot_z, yaw_only
 
 FEET = ("LeftFoot", "RightFoot")
-
-
-def yaw_only(rotations: np.ndarray) -> np.ndarray:
-    """(..., 3, 3) rotations reduced to their heading: roll and pitch zeroed."""
-    yaw = np.arctan2(rotations[..., 1, 0], rotations[..., 0, 0])
-    return rot_z(yaw)
-
-
-def rot_z(angle: np.ndarray) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    out = np.zeros((*np.shape(angle), 3, 3))
-    out[..., 0, 0], out[..., 0, 1], out[..., 1, 0], out[..., 1, 1] = c, -s, s, c
-    out[..., 2, 2] = 1.0
-    return out
 
 
 def segment_targets(

@@ -17,7 +17,8 @@ import pinocchio as pin
 from pimann.errors import PimannError
 from pimann.params import SimulateParams
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, Robot
-from pimann.sim.wbc import SOLE_HEIGHT, yaw_rotation
+from pimann.rotations import rot_z
+from pimann.sim.wbc import SOLE_HEIGHT
 from pimann.trajectory import Trajectory
 
 
@@ -75,7 +76,7 @@ class FootstepPlan:
 
     def sole_placement(self, side: int, t: float) -> pin.SE3:
         position, yaw = self.foot_pose(side, t)
-        return pin.SE3(yaw_rotation(yaw), position)
+        return pin.SE3(rot_z(yaw), position)
 
     def generated_time(self, t: float) -> float:
         """The generated trajectory's time that robot time t replays (clamped to its span)."""

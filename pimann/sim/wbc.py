@@ -18,18 +18,14 @@ from pink.tasks import ComTask, FrameTask, PostureTask
 
 from pimann.params import SimulateParams
 from pimann.robot import CHEST_FRAME, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
+from pimann.rotations import rot_z
 
 SOLE_HEIGHT = 0.002  # the foot boxes' bottoms lie this far above the sole frames (SPEC 9.1)
 
 
-def yaw_rotation(yaw: float) -> np.ndarray:
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-
-
 def sole_pose(position_xy, z: float, yaw: float) -> pin.SE3:
     """A flat sole placement: the foot boxes touch the floor when z = 0."""
-    return pin.SE3(yaw_rotation(yaw), np.array([position_xy[0], position_xy[1], z - SOLE_HEIGHT]))
+    return pin.SE3(rot_z(yaw), np.array([position_xy[0], position_xy[1], z - SOLE_HEIGHT]))
 
 
 @dataclasses.dataclass
@@ -78,7 +74,7 @@ class WholeBodyIK:
         self.feet[0].set_target(targets.left)
         self.feet[1].set_target(targets.right)
         self.com.set_target(np.asarray(targets.com, dtype=float))
-        self.chest.set_target(pin.SE3(yaw_rotation(targets.chest_yaw), np.zeros(3)))
+        self.chest.set_target(pin.SE3(rot_z(targets.chest_yaw), np.zeros(3)))
         posture = self.configuration.q.copy()
         posture[self.robot.q_index] = targets.posture
         self.posture.set_target(posture)
