@@ -22,10 +22,7 @@ import dataclasses
 import json
 import logging
 import math
-import os
-from collections.abc import Callable, Iterable, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +33,7 @@ from tqdm import tqdm
 from pimann.atomic import atomic_path, write_text_atomic
 from pimann.errors import PimannError
 from pimann.metrics import aggregate
+from pimann.parallel import pool_map
 from pimann.params import FiguresParams, Params, as_dict
 
 log = logging.getLogger(__name__)
@@ -158,14 +156,6 @@ def _generate(job: tuple[Path, str, Path, bool, Params]) -> Path:
     return output
 
 
-def _pool_map(function: Callable, jobs: Sequence, workers: int, desc: str) -> list:
-    """`function` over `jobs` in order, in `workers` spawned processes (1: in this one)."""
-    if workers <= 1 or len(jobs) <= 1:
-        return [function(job) for job in tqdm(jobs, desc=desc)]
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-        return list(tqdm(pool.map(function, jobs), total=len(jobs), desc=desc))
-
-
 def run_rollouts(
     models_dir: str | Path, out_dir: str | Path, params: Params, workers: int = 2
 ) -> list[Path]:
@@ -194,7 +184,7 @@ def run_rollouts(
         tmp.mkdir()
         for seed in seeds:
             (tmp / str(seed)).mkdir()
-        _pool_map(_generate, jobs, workers, f"rollouts {out_dir.name}")
+        pool_map(_generate, jobs, workers, f"rollouts {out_dir.name}")
         (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return sorted(out_dir.glob("*/*.h5"))
 
@@ -229,7 +219,7 @@ def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) 
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
     infos = {model: _model_info(root, model) for model in {key.model for key, _ in rollouts}}
-    results = _pool_map(
+    results = pool_map(
         _metrics_job, [(path, params.evaluate) for _, path in rollouts], workers, "metrics"
     )
     rows = []
@@ -811,7 +801,3 @@ def evaluate_all(
     selection = timeseries_selection(frame, params.figures)
     write_timeseries(rollouts_dir, Path(results_dir) / "timeseries", selection, params)
     return write_results(frame, results_dir, params, provenance(params, rollouts_dir), selection)
-
-
-def cpu_workers(requested: int) -> int:
-    return max(1, min(requested, os.cpu_count() or 1))

@@ -7,8 +7,10 @@ matmul against all experts at once instead of one weight matrix per sample (SPEC
 
 `ensemble` models (e.g. the 5 seeds of one PI weight) live in one module with a leading
 ensemble dim on every parameter, so one optimiser step trains all of them. Members never
-mix: summing the members' losses gives each member exactly its solo gradient, and AdamW acts
-elementwise (do not clip the gradient norm across members).
+mix: summing the members' losses gives each member exactly its solo gradient, AdamW acts
+elementwise (do not clip the gradient norm across members), and with `seed_dropout` each
+member draws its dropout masks from its own generator, so a member trains the same whatever
+ensemble it is part of.
 """
 
 from __future__ import annotations
@@ -52,11 +54,14 @@ class MANN(nn.Module):
             seeds = torch.randint(0, 2**62, (ensemble,)).tolist()
         if len(seeds) != ensemble:
             raise ValueError(f"{len(seeds)} seeds for an ensemble of {ensemble}")
+        if not 0.0 <= params.dropout < 1.0:
+            raise ValueError(f"dropout must be in [0, 1), not {params.dropout}")
         if params.activation != "elu":
             raise ValueError(f"unsupported activation {params.activation!r}")
         self.input_dim, self.output_dim, self.ensemble = input_dim, output_dim, ensemble
         self.params, self.n_experts, self.dropout = params, params.n_experts, params.dropout
         self.seeds = list(seeds)
+        self.dropout_generators: list[torch.Generator] | None = None
         gate_sizes = _sizes(input_dim, params.gating_hidden, params.n_experts, params.gating_layers)
         expert_sizes = _sizes(
             input_dim, params.prediction_hidden, output_dim, params.prediction_layers
@@ -88,6 +93,29 @@ class MANN(nn.Module):
             tensors[f"expert_bias_{i}"] = bias.reshape(k * fan_out)
         return tensors
 
+    def seed_dropout(self, seeds: list[int] | None) -> None:
+        """One dropout generator per member, seeded with seeds[k]; None: torch's global RNG."""
+        if seeds is None:
+            self.dropout_generators = None
+            return
+        if len(seeds) != self.ensemble:
+            raise ValueError(f"{len(seeds)} dropout seeds for an ensemble of {self.ensemble}")
+        device = next(self.parameters()).device
+        self.dropout_generators = [torch.Generator(device).manual_seed(s) for s in seeds]
+
+    def _dropout(self, h: torch.Tensor) -> torch.Tensor:
+        """Inverted dropout; a uniform draw and a compare cost half of torch's bernoulli_."""
+        if not self.training or self.dropout == 0.0:
+            return h
+        if self.dropout_generators is None:
+            noise = torch.rand_like(h)
+        else:
+            noise = torch.stack([
+                torch.rand(h.shape[1:], generator=g, device=h.device, dtype=h.dtype)
+                for g in self.dropout_generators
+            ])  # fmt: skip
+        return h * (noise >= self.dropout) * (1.0 / (1.0 - self.dropout))
+
     def expert_layer(self, expert: int, layer: int) -> tuple[torch.Tensor, torch.Tensor]:
         """Expert `expert`'s plain weight (E, out, in) and bias (E, out) of one layer."""
         weight = getattr(self, f"expert_weight_{layer}")
@@ -106,7 +134,7 @@ class MANN(nn.Module):
     def _gate(self, x: torch.Tensor) -> torch.Tensor:
         h = x
         for i in range(self.n_gate_layers):
-            h = F.dropout(h, self.dropout, self.training)
+            h = self._dropout(h)
             weight, bias = getattr(self, f"gate_weight_{i}"), getattr(self, f"gate_bias_{i}")
             h = torch.baddbmm(bias.unsqueeze(1), h, weight.transpose(1, 2))
             if i < self.n_gate_layers - 1:
@@ -130,7 +158,7 @@ class MANN(nn.Module):
         theta = theta.unsqueeze(-1)  # (E, B, K, 1)
         h = x
         for i in range(self.n_expert_layers):
-            h = F.dropout(h, self.dropout, self.training)
+            h = self._dropout(h)
             weight = getattr(self, f"expert_weight_{i}")
             bias = getattr(self, f"expert_bias_{i}")
             out = torch.baddbmm(bias.unsqueeze(1), h, weight)  # (E, B, K * out)

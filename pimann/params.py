@@ -116,6 +116,7 @@ class TrainParams:
     max_train_samples: int | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]
+    workers: int  # CPU processes the seeds are split among (no effect on the result)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -1,10 +1,12 @@
 """Training of the (physics-informed) MANN: L = L_D + w L_B (SPEC 5, 6; Eq. overall_loss).
 
-The seeds of one PI weight train together as one vectorised ensemble (`MANN.from_seeds`):
-the members never mix (their losses are summed, AdamW acts elementwise), so member k is the
-model seed k would give alone, at a fraction of the cost. Each member draws its own data
-order from its seed; dropout draws from a torch seed fixed per epoch, so a run resumed from
-its per-epoch checkpoint continues exactly as an uninterrupted one.
+The seeds of one PI weight train together as vectorised ensembles (`MANN.from_seeds`), split
+over `train.workers` single-threaded processes on the CPU: the members never mix (their
+losses are summed, AdamW acts elementwise), and each member draws its data order, its
+initial weights and its dropout masks from its own seed, so member k is the model seed k
+would give alone whatever group it trains in. The dropout and order seeds are fixed per
+epoch, so a run resumed from its per-epoch checkpoint continues exactly as an uninterrupted
+one.
 
 L_D is the MSE on the normalised outputs; L_B (`PhysicsInformedLoss`) is taken in physical
 units on the denormalised prediction: the base twist at step i (the output window's offset
@@ -37,9 +39,11 @@ from pimann.atomic import atomic_path
 from pimann.errors import PimannError
 from pimann.features import FeatureLayout, Normalisation, read_dataset
 from pimann.mann import MANN
+from pimann.parallel import cpu_workers, pool_map
 from pimann.params import ModelParams, Params, as_dict
 from pimann.physics_loss import PhysicsInformedLoss
 from pimann.robot import load_robot
+from pimann.stage import LOG_FORMAT
 
 log = logging.getLogger(__name__)
 
@@ -75,9 +79,9 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
-def _epoch_seed(seeds: list[int], epoch: int) -> int:
-    """The torch seed for dropout in one epoch (so resuming needs no saved RNG state)."""
-    return int(np.random.SeedSequence([*seeds, epoch, 0x5EED]).generate_state(1)[0])
+def _dropout_seed(seed: int, epoch: int) -> int:
+    """A member's dropout seed in one epoch (so resuming needs no saved RNG state)."""
+    return int(np.random.SeedSequence([seed, epoch, 0x5EED]).generate_state(1)[0])
 
 
 class TrainingLoss(torch.nn.Module):
@@ -222,17 +226,91 @@ def _train(
     plots_dir: str | Path | None,
     stop_after: int | None,
 ) -> dict[int, dict]:
-    """train_models' body (see there)."""
+    """train_models' body: the seeds split into `train.workers` groups, then the outputs."""
     if not seeds or len(set(seeds)) != len(seeds):
         raise PimannError(None, f"train.seeds must be distinct and non-empty, not {seeds}")
     config = params.train
     device = pick_device(config.device) if device is None else torch.device(device)
+    checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
+    data = read_dataset(dataset_path)  # read here too: bad data fails before any worker starts
+    workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds)))
+    groups = [list(map(int, g)) for g in np.array_split(np.array(seeds), workers)]
+    threads = max(1, torch.get_num_threads() // workers)
+    jobs = [
+        _GroupJob(dataset_path, group, pi_weight, params, str(device), checkpoint_dir,
+                  stop_after, threads if workers > 1 else None, logging.getLogger().level)
+        for group in groups
+    ]  # fmt: skip
+    log.info("w=%g: seeds %s in %d process(es)", pi_weight, groups, workers)
+    results = pool_map(_train_group, jobs, workers, f"train w={pi_weight:g}")
+    if any(result is None for result in results):
+        return {}  # stopped early (stop_after)
+    members = {seed: member for result in results for seed, member in result.items()}
+
+    n = len(data.x_train)
+    if config.max_train_samples is not None:
+        n = min(n, config.max_train_samples)
+    metas = {}
+    with atomic_path(out_dir) as tmp:
+        for seed in seeds:
+            member = members[seed]
+            meta = {
+                "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
+                "best_epoch": member["best_epoch"], "best_test_loss": member["best_loss"],
+                "epochs": config.epochs, "train_samples": n, "test_samples": len(data.x_test),
+                "dataset": str(dataset_path), "train_clips": data.train_clips,
+                "test_clips": data.test_clips,
+                "params": {"model": as_dict(params.model), "train": as_dict(config)},
+            }  # fmt: skip
+            model = MANN(data.layout.input_dim, data.layout.output_dim, params.model, seeds=[seed])
+            model.load_state_dict(member["state_dict"])
+            save_model(tmp / str(seed), model, data.layout, data.stats, meta)
+            metas[seed] = meta
+    if plots_dir is not None:
+        with atomic_path(plots_dir) as tmp:
+            tmp.mkdir()
+            for seed in seeds:
+                write_loss_csv(tmp / f"seed{seed}.csv", members[seed]["history"])
+    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
+    return metas
+
+
+@dataclasses.dataclass(frozen=True)
+class _GroupJob:
+    """What one training process needs (picklable, for spawned workers)."""
+
+    dataset_path: Path
+    seeds: list[int]
+    pi_weight: float
+    params: Params
+    device: str
+    checkpoint_dir: Path
+    stop_after: int | None
+    threads: int | None  # torch threads of a worker process; None: leave as is
+    log_level: int
+
+
+def _train_group(job: _GroupJob) -> dict[int, dict] | None:
+    """Train the ensemble of `job.seeds`; per seed its best weights, epoch, loss and history.
+
+    None when stopped by `stop_after` before the last epoch (the checkpoint is kept).
+    """
+    if job.threads is not None:  # a spawned worker
+        torch.set_num_threads(job.threads)
+        logging.basicConfig(level=job.log_level, format=LOG_FORMAT)
+    with _deterministic():
+        return _train_ensemble(job)
+
+
+def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
+    """_train_group's body (see there)."""
+    config, seeds, pi_weight = job.params.train, job.seeds, job.pi_weight
+    device = torch.device(job.device)
     if device.type == "cuda":
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
-    checkpoint = checkpoint_dir / CHECKPOINT_FILE
+    checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
 
-    data = read_dataset(dataset_path)
+    data = read_dataset(job.dataset_path)
     if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
         keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
         keep = keep.astype(np.int64)
@@ -245,13 +323,13 @@ def _train(
     n, batch = len(x_train), config.batch_size
     batches = math.ceil(n / batch)
     weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)
-    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, params.model, seeds)
+    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, job.params.model, seeds)
     model.to(device).train()
     optimizer = torch.optim.AdamW(
         model.parameters(), lr=config.learning_rate, weight_decay=weight_decay
     )
     loss_fn = TrainingLoss(data.layout, data.stats, config.pi_configuration, device)
-    fingerprint = _fingerprint(dataset_path, pi_weight, list(seeds), params)
+    fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)
     state = _State(
         0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
@@ -263,22 +341,22 @@ def _train(
             state = _State(**{f.name: saved[f.name] for f in dataclasses.fields(_State)})
             model.load_state_dict(state.model)
             optimizer.load_state_dict(state.optimizer)
-            log.info("resuming %s from epoch %d", out_dir, state.epoch)
+            log.info("resuming seeds %s from epoch %d", seeds, state.epoch)
         else:
-            log.info("ignoring a checkpoint of other data or parameters in %s", checkpoint_dir)
+            log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
 
     with_pi_train = pi_weight != 0.0
-    last = config.epochs if stop_after is None else min(stop_after, config.epochs)
+    last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
     progress = tqdm(
         range(state.epoch, last), initial=state.epoch, total=config.epochs,
-        desc=f"train w={pi_weight:g}", unit="epoch", disable=None,
+        desc=f"train w={pi_weight:g} seeds {seeds}", unit="epoch", disable=None,
     )  # fmt: skip
     for epoch in progress:
         factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
         for group in optimizer.param_groups:
             group["lr"] = config.learning_rate * factor
             group["weight_decay"] = weight_decay * factor
-        torch.manual_seed(_epoch_seed(list(seeds), epoch))
+        model.seed_dropout([_dropout_seed(seed, epoch) for seed in seeds])
         order = torch.as_tensor(
             np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
         )  # (E, N)
@@ -312,8 +390,9 @@ def _train(
         mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
         progress.set_postfix(train=f"{mean['train_loss']:.4f}", test=f"{mean['test_loss']:.4f}")
         log.info(
-            "w=%g epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, pi %.5f)",
-            pi_weight, epoch + 1, config.epochs, *(mean[c] for c in LOSS_COLUMNS),
+            "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, "
+            "pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
+            *(mean[c] for c in LOSS_COLUMNS),
         )  # fmt: skip
         state.epoch = epoch + 1
         state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
@@ -321,29 +400,17 @@ def _train(
             torch.save({**dataclasses.asdict(state), "fingerprint": fingerprint}, tmp)
     progress.close()
     if state.epoch < config.epochs:
-        return {}
-
+        return None
     model.load_state_dict(state.best)
-    metas = {}
-    with atomic_path(out_dir) as tmp:
-        for k, seed in enumerate(seeds):
-            meta = {
-                "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
-                "best_epoch": state.best_epoch[k], "best_test_loss": state.best_loss[k],
-                "epochs": config.epochs, "train_samples": n, "test_samples": len(x_test),
-                "dataset": str(dataset_path), "train_clips": data.train_clips,
-                "test_clips": data.test_clips,
-                "params": {"model": as_dict(params.model), "train": as_dict(config)},
-            }  # fmt: skip
-            save_model(tmp / str(seed), model.member(k), data.layout, data.stats, meta)
-            metas[seed] = meta
-    if plots_dir is not None:
-        with atomic_path(plots_dir) as tmp:
-            tmp.mkdir()
-            for k, seed in enumerate(seeds):
-                write_loss_csv(tmp / f"seed{seed}.csv", state.history[k])
-    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
-    return metas
+    return {
+        seed: {
+            "state_dict": {k: v.cpu() for k, v in model.member(i).state_dict().items()},
+            "best_epoch": state.best_epoch[i],
+            "best_loss": state.best_loss[i],
+            "history": state.history[i],
+        }
+        for i, seed in enumerate(seeds)
+    }
 
 
 def write_loss_csv(path: Path, history: list[dict]) -> None:

@@ -9,7 +9,8 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.evaluate import cpu_workers, evaluate_all
+from pimann.evaluate import evaluate_all
+from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry

@@ -15,7 +15,8 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.evaluate import cpu_workers, run_rollouts
+from pimann.evaluate import run_rollouts
+from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry

@@ -233,8 +233,9 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
 
 def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
     """A PimannError raised in a spawned worker comes back as a PimannError, not a crash."""
-    from pimann.evaluate import _metrics_job, _pool_map
+    from pimann.evaluate import _metrics_job
+    from pimann.parallel import pool_map
 
     missing = tmp_path / "nope.h5"
     with pytest.raises(PimannError, match="nope.h5: file not found"):
-        _pool_map(_metrics_job, [(missing, params.evaluate)] * 2, 2, "metrics")
+        pool_map(_metrics_job, [(missing, params.evaluate)] * 2, 2, "metrics")

@@ -98,6 +98,25 @@ def test_dropout_only_in_training(params):
     torch.testing.assert_close(model(x), model(x), rtol=0, atol=0)
 
 
+def test_seeded_dropout_is_per_member(params):
+    """A member's dropout masks come from its own seed, not from the ensemble it is in."""
+    ensemble = MANN.from_seeds(IN, OUT, params, [3, 4]).train()
+    single = MANN(IN, OUT, params, seeds=[4]).train()
+    x = torch.randn(2, 64, IN, generator=torch.Generator().manual_seed(6))
+    ensemble.seed_dropout([100, 200])
+    single.seed_dropout([200])
+    torch.testing.assert_close(ensemble(x)[1], single(x[1]), rtol=1e-6, atol=1e-6)
+    ensemble.eval()
+    clean = ensemble(x)
+    ensemble.train()
+    assert (ensemble(x)[1] - clean[1]).abs().max() > 1e-3  # dropout is on
+    # about 30% of a layer's inputs dropped, the kept ones scaled by 1 / 0.7
+    h = torch.ones(2, 1000, 512)
+    dropped = ensemble._dropout(h)
+    assert dropped.unique().tolist() == pytest.approx([0.0, 1 / 0.7])
+    assert (dropped == 0).float().mean().item() == pytest.approx(params.dropout, abs=0.01)
+
+
 def test_rejects_wrong_shapes(params):
     with pytest.raises(ValueError, match="x must be"):
         MANN.from_seeds(IN, OUT, params, [0, 1])(torch.zeros(4, IN))

@@ -92,6 +92,19 @@ def test_training_is_deterministic_resumes_exactly_and_learns(tmp_path, params, 
     assert model(x).shape == (3, 100) and stats.y_std.shape == (100,)
 
 
+def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
+    """Seeds split over 2 processes, or all in one, or alone: the same models."""
+    one = dataclasses.replace(params, train=dataclasses.replace(params.train, workers=1))
+    two = dataclasses.replace(params, train=dataclasses.replace(params.train, workers=2))
+    train_models(dataset_path, tmp_path / "one", 1.0, [0, 1, 2], one, "cpu")
+    train_models(dataset_path, tmp_path / "two", 1.0, [0, 1, 2], two, "cpu")
+    train_models(dataset_path, tmp_path / "alone", 1.0, [2], one, "cpu")
+    reference = _weights(tmp_path / "one" / "2")
+    for other in (_weights(tmp_path / "two" / "2"), _weights(tmp_path / "alone" / "2")):
+        for name in reference:
+            torch.testing.assert_close(other[name], reference[name], rtol=1e-5, atol=1e-6)
+
+
 def test_pi_term_enters_the_gradient(params, dataset_path):
     from pimann.features import read_dataset
 
