@@ -269,6 +269,10 @@ class FeatureDataset:
     sources: list[str]  # each clip's source (a clip and its mirror share one)
     train_origin: np.ndarray  # (N, 2) clip index, step
     test_origin: np.ndarray
+    # (N, 2) bool: left and right foot in contact at the sample's step (the data's own contact
+    # detection), for `train.pi_support: data_contacts`; None when a clip has no contacts
+    train_contacts: np.ndarray | None = None
+    test_contacts: np.ndarray | None = None
 
     @property
     def train_clips(self) -> list[str]:
@@ -292,23 +296,28 @@ def build_dataset(
     names = [name for name, _ in clips]
     sources = [t.source for _, t in clips]
     test_sources = split_sources(sources, params.test_fraction, params.split_seed)
-    parts: dict[bool, list[tuple[np.ndarray, np.ndarray, np.ndarray]]] = {False: [], True: []}
+    with_contacts = all(t.contacts is not None for _, t in clips)
+    if not with_contacts:
+        log.info("not every clip has contacts: the dataset carries none")
+    parts: dict[bool, list[tuple[np.ndarray, ...]]] = {False: [], True: []}
     for k, (name, trajectory) in enumerate(clips):
         x, y, steps = clip_features(trajectory, layout)
         if len(steps) == 0:
             log.info("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
         origin = np.stack([np.full(len(steps), k), steps], axis=1)
-        parts[trajectory.source in test_sources].append((x, y, origin))
+        contacts = trajectory.contacts[steps] if with_contacts else np.zeros((len(steps), 2))
+        parts[trajectory.source in test_sources].append((x, y, origin, contacts))
 
-    def stack(side: bool) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def stack(side: bool) -> tuple[np.ndarray, ...]:
         items = parts[side] or [
-            (np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty((0, 2)))
-        ]
-        x, y, origin = (np.concatenate(a) for a in zip(*items, strict=True))
-        return x, y, origin.astype(np.int64)
+            (np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty((0, 2)),
+             np.empty((0, 2)))
+        ]  # fmt: skip
+        x, y, origin, contacts = (np.concatenate(a) for a in zip(*items, strict=True))
+        return x, y, origin.astype(np.int64), contacts.astype(bool) if with_contacts else None
 
-    x_train, y_train, train_origin = stack(False)
-    x_test, y_test, test_origin = stack(True)
+    x_train, y_train, train_origin, train_contacts = stack(False)
+    x_test, y_test, test_origin, test_contacts = stack(True)
     if len(x_train) == 0 or len(x_test) == 0:
         raise PimannError(
             params.input, f"empty split: {len(x_train)} train, {len(x_test)} test samples"
@@ -325,19 +334,25 @@ def build_dataset(
         sources=sources,
         train_origin=train_origin,
         test_origin=test_origin,
+        train_contacts=train_contacts,
+        test_contacts=test_contacts,
     )
 
 
 def _arrays(dataset: FeatureDataset) -> dict[str, np.ndarray]:
     """The file's datasets, by name."""
     stats = dataset.stats
-    return {
+    arrays = {
         "X_train": dataset.x_train, "Y_train": dataset.y_train,
         "X_test": dataset.x_test, "Y_test": dataset.y_test,
         "X_mean": stats.x_mean, "X_std": stats.x_std,
         "Y_mean": stats.y_mean, "Y_std": stats.y_std,
         "train_origin": dataset.train_origin, "test_origin": dataset.test_origin,
     }  # fmt: skip
+    if dataset.train_contacts is not None and dataset.test_contacts is not None:
+        arrays["train_contacts"] = dataset.train_contacts
+        arrays["test_contacts"] = dataset.test_contacts
+    return arrays
 
 
 def write_dataset(path: str | Path, dataset: FeatureDataset) -> None:
@@ -381,4 +396,6 @@ def read_dataset(path: str | Path) -> FeatureDataset:
             sources=[str(s) for s in file.attrs["sources"]],
             train_origin=file["train_origin"][()],
             test_origin=file["test_origin"][()],
+            train_contacts=file["train_contacts"][()] if "train_contacts" in file else None,
+            test_contacts=file["test_contacts"][()] if "test_contacts" in file else None,
         )

@@ -113,6 +113,7 @@ class TrainParams:
     restart_period: int  # epochs of the first cosine cycle (Te)
     restart_mult: int  # each cycle this many times longer (Tmult)
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
+    pi_support: Literal["lower_sole", "data_contacts"]  # which foot L_B keeps still
     max_train_samples: int | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]

@@ -25,6 +25,9 @@ class PhysicsInformedLoss(nn.Module):
     over the 6 twist components of the squared residual
     r = [v; omega] + [alpha (J_LF^B)^-1 J_LF^s + (1 - alpha) (J_RF^B)^-1 J_RF^s] sdot,
     alpha = 1 where the left sole is lower than the right one, as in the authors' code.
+    With `support` (..., 2) flags of the feet in contact (the data's, not predicted), the
+    residual is taken for each foot in contact and averaged over them: double support keeps
+    both feet still, a frame with no foot down adds nothing.
     """
 
     def __init__(
@@ -72,11 +75,16 @@ class PhysicsInformedLoss(nn.Module):
         base_linear_velocity: torch.Tensor,
         base_angular_velocity: torch.Tensor,
         joint_velocities: torch.Tensor,
+        support: torch.Tensor | None = None,
     ) -> torch.Tensor:
         """(...,) loss; `base_position` is accepted for the interface but cancels out."""
         del base_position  # the body-fixed Jacobians and the sole height gap ignore it
         feet, chain = self.foot_twists(joints, joint_velocities)
-        left = self.left_is_support(base_rpy, chain.frame_positions)
-        support = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
         twist = torch.cat((base_linear_velocity, base_angular_velocity), -1)
-        return (twist + support).square().mean(-1)
+        if support is not None:
+            per_foot = (twist.unsqueeze(-2) + feet).square().mean(-1)  # (..., 2)
+            weight = support.to(per_foot.dtype)
+            return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
+        left = self.left_is_support(base_rpy, chain.frame_positions)
+        foot = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
+        return (twist + foot).square().mean(-1)

@@ -93,9 +93,11 @@ class TrainingLoss(torch.nn.Module):
         stats: Normalisation,
         pi_configuration: str,
         device: torch.device,
+        pi_support: str = "lower_sole",
     ):
         super().__init__()
         self.layout, self.pi_configuration = layout, pi_configuration
+        self.pi_support = pi_support
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
         self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
@@ -120,13 +122,24 @@ class TrainingLoss(torch.nn.Module):
         }
 
     def forward(
-        self, prediction: torch.Tensor, target: torch.Tensor, with_pi: bool = True
+        self,
+        prediction: torch.Tensor,
+        target: torch.Tensor,
+        with_pi: bool = True,
+        contacts: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False."""
+        """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False.
+
+        `contacts` (E, B, 2): the data's feet in contact, needed with pi_support data_contacts.
+        """
         mse = (prediction - target).square().mean(dim=(-2, -1))
         if not with_pi:
             return mse, torch.zeros_like(mse)
         terms = self.pi_terms(prediction)
+        if self.pi_support == "data_contacts":
+            if contacts is None:
+                raise ValueError("pi_support data_contacts needs the samples' contacts")
+            terms["support"] = contacts
         if self.pi_configuration == "ground_truth":
             truth = self.pi_terms(target)
             for name in ("base_position", "base_rpy", "joints"):
@@ -162,6 +175,7 @@ def _evaluate(
     loss: TrainingLoss,
     x: torch.Tensor,
     y: torch.Tensor,
+    contacts: torch.Tensor | None,
     batch: int,
     with_pi: bool,
 ) -> tuple[torch.Tensor, torch.Tensor]:
@@ -172,7 +186,9 @@ def _evaluate(
         for start in range(0, len(x), batch):
             xb = x[start : start + batch].expand(model.ensemble, -1, -1)
             yb = y[start : start + batch].expand(model.ensemble, -1, -1)
-            mse, pi = loss(model(xb), yb, with_pi)
+            cb = None if contacts is None else contacts[start : start + batch]
+            cb = None if cb is None else cb.expand(model.ensemble, -1, -1)
+            mse, pi = loss(model(xb), yb, with_pi, cb)
             totals += torch.stack([mse, pi]) * xb.shape[1]
     model.train()
     return totals[0] / len(x), totals[1] / len(x)
@@ -233,6 +249,10 @@ def _train(
     device = pick_device(config.device) if device is None else torch.device(device)
     checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
     data = read_dataset(dataset_path)  # read here too: bad data fails before any worker starts
+    if config.pi_support == "data_contacts" and pi_weight != 0.0 and data.train_contacts is None:
+        raise PimannError(
+            dataset_path, "has no contact flags, which train.pi_support data_contacts needs"
+        )
     workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds)))
     groups = [list(map(int, g)) for g in np.array_split(np.array(seeds), workers)]
     threads = max(1, torch.get_num_threads() // workers)
@@ -315,10 +335,16 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
         keep = keep.astype(np.int64)
         data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
+        if data.train_contacts is not None:
+            data.train_contacts = data.train_contacts[keep]
         log.info("training on %d evenly spaced of the training samples", len(keep))
     x_train, y_train, x_test, y_test = (
         torch.as_tensor(a, dtype=torch.float32, device=device)
         for a in (data.x_train, data.y_train, data.x_test, data.y_test)
+    )
+    c_train, c_test = (
+        None if c is None else torch.as_tensor(c, dtype=torch.bool, device=device)
+        for c in (data.train_contacts, data.test_contacts)
     )
     n, batch = len(x_train), config.batch_size
     batches = math.ceil(n / batch)
@@ -328,7 +354,9 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     optimizer = torch.optim.AdamW(
         model.parameters(), lr=config.learning_rate, weight_decay=weight_decay
     )
-    loss_fn = TrainingLoss(data.layout, data.stats, config.pi_configuration, device)
+    loss_fn = TrainingLoss(
+        data.layout, data.stats, config.pi_configuration, device, config.pi_support
+    )
     fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)
     state = _State(
@@ -363,17 +391,19 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         totals = torch.zeros(2, members, device=device)
         for start in range(0, n, batch):
             index = order[:, start : start + batch]
-            mse, pi = loss_fn(model(x_train[index]), y_train[index], with_pi_train)
+            contacts = None if c_train is None else c_train[index]
+            mse, pi = loss_fn(model(x_train[index]), y_train[index], with_pi_train, contacts)
             optimizer.zero_grad(set_to_none=True)
             (mse + pi_weight * pi).sum().backward()
             optimizer.step()
             totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
         train_mse, train_pi = (totals / n).tolist()
-        test = _evaluate(model, loss_fn, x_test, y_test, config.eval_batch_size, True)
+        test = _evaluate(model, loss_fn, x_test, y_test, c_test, config.eval_batch_size, True)
         test_mse, test_pi = (t.tolist() for t in test)
         if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
             every = max(1, n // 4096)
             sample = (x_train[::every], y_train[::every])
+            sample += (None if c_train is None else c_train[::every],)
             train_pi = _evaluate(model, loss_fn, *sample, config.eval_batch_size, True)[1].tolist()
         for k in range(members):
             row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}

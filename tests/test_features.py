@@ -39,8 +39,10 @@ def synthetic_clip(
     rotation = Rotation.from_euler("z", (yaw_rate * time)[:, None]) * Rotation.from_euler(
         "y", PITCH
     )
-    joints = STANDING_JOINTS + 0.2 * np.sin(2 * np.pi * 1.1 * time[:, None] + phase)
+    gait = np.sin(2 * np.pi * 1.1 * time + phase)
+    joints = STANDING_JOINTS + 0.2 * gait[:, None]
     return Trajectory(
+        contacts=np.stack([gait > -0.3, gait < 0.3], axis=1),  # left, right; double support
         time=time,
         base_position=np.array([0.0, 0.0, 0.77]) + time[:, None] * np.asarray(velocity),
         base_quaternion_xyzw=rotation.as_quat(),
@@ -184,3 +186,10 @@ def test_normalisation_uses_training_statistics_only(params, tmp_path):
     np.testing.assert_array_equal(back.x_test, dataset.x_test)
     np.testing.assert_array_equal(back.stats.y_std, dataset.stats.y_std)
     assert N_JOINTS == back.layout.n_joints
+    # each sample carries its clip's contact flags at its step (for pi_support data_contacts)
+    clip_of = dict(clips)
+    for contacts, origin in ((back.train_contacts, back.train_origin),
+                             (back.test_contacts, back.test_origin)):  # fmt: skip
+        expected = [clip_of[dataset.clips[k]].contacts[step] for k, step in origin]
+        np.testing.assert_array_equal(contacts, np.array(expected))
+    assert back.train_contacts.all(-1).any() and not back.train_contacts.all()

@@ -61,6 +61,25 @@ def test_alpha_picks_the_lower_foot(robot, loss, rng):
     assert (evaluate(loss, wrong) > 1e-4).all()
 
 
+def test_data_contacts_choose_the_feet(robot, loss, rng):
+    """Given contact flags: the flagged foot's residual, both averaged, none gives 0."""
+    rows = still_foot_states(robot, rng, 8)
+    position, rpy, joints, twist, joint_velocities = (
+        torch.tensor(np.stack([r[i] for r in rows])) for i in range(5)
+    )
+    left = torch.tensor([r[5] == LEFT_SOLE for r in rows])
+    args = (position, rpy, joints, twist[:, :3], twist[:, 3:], joint_velocities)
+    lower = loss(*args)
+    as_data = loss(*args, support=torch.stack((left, ~left), -1))
+    torch.testing.assert_close(as_data, lower)  # the lower sole flagged: the paper's value
+    swapped = loss(*args, support=torch.stack((~left, left), -1))
+    assert (swapped > 1e-4).all()  # the moving foot flagged instead
+    both = loss(*args, support=torch.ones(8, 2, dtype=torch.bool))
+    torch.testing.assert_close(both, (lower + swapped) / 2)
+    none = loss(*args, support=torch.zeros(8, 2, dtype=torch.bool))
+    assert (none == 0).all()
+
+
 def test_loss_grows_with_foot_sliding(robot, loss, rng):
     """Sliding the support sole at speed u makes the base twist off by (J^B)^-1 u."""
     rows = still_foot_states(robot, rng, 4)

@@ -11,6 +11,7 @@ import pytest
 import torch
 from test_features import synthetic_collection
 
+from pimann.errors import PimannError
 from pimann.features import build_dataset, write_dataset
 from pimann.mann import MANN
 from pimann.params import ModelParams, load_params
@@ -103,6 +104,26 @@ def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
     for other in (_weights(tmp_path / "two" / "2"), _weights(tmp_path / "alone" / "2")):
         for name in reference:
             torch.testing.assert_close(other[name], reference[name], rtol=1e-5, atol=1e-6)
+
+
+def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
+    """data_contacts trains on the data's flags, differs from lower_sole, and needs them."""
+    from pimann.features import read_dataset
+
+    contacts = dataclasses.replace(
+        params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
+    )
+    lower = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    train_models(dataset_path, tmp_path / "contacts", 1.0, [0], contacts, "cpu")
+    train_models(dataset_path, tmp_path / "lower", 1.0, [0], lower, "cpu")
+    a, b = _weights(tmp_path / "contacts" / "0"), _weights(tmp_path / "lower" / "0")
+    assert not torch.equal(a["expert_weight_2"], b["expert_weight_2"])
+    data = read_dataset(dataset_path)
+    data.train_contacts = data.test_contacts = None
+    bare = tmp_path / "bare.h5"
+    write_dataset(bare, data)
+    with pytest.raises(PimannError, match="contact flags"):
+        train_models(bare, tmp_path / "bare", 1.0, [0], contacts, "cpu")
 
 
 def test_pi_term_enters_the_gradient(params, dataset_path):
