@@ -29,6 +29,7 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from pimann.atomic import atomic_path
@@ -243,6 +244,18 @@ def clip_features(
     return x, y, steps
 
 
+def settled_contacts(contacts: np.ndarray, margin: int) -> np.ndarray:
+    """(T, 2) contact flags kept only `margin` frames or more away from a switch of that foot.
+
+    The clip's ends are not switches. Erosion by a (2 margin + 1)-frame window.
+    """
+    contacts = np.asarray(contacts, bool)
+    if margin <= 0:
+        return contacts.copy()
+    structure = np.ones((2 * margin + 1, 1), bool)
+    return ndimage.binary_erosion(contacts, structure, border_value=1)
+
+
 def split_sources(sources: Iterable[str], test_fraction: float, seed: int) -> set[str]:
     """The source clips held out for testing: a seeded shuffle of the sorted unique names."""
     unique = sorted(set(sources))
@@ -305,7 +318,10 @@ def build_dataset(
         if len(steps) == 0:
             log.info("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
         origin = np.stack([np.full(len(steps), k), steps], axis=1)
-        contacts = trajectory.contacts[steps] if with_contacts else np.zeros((len(steps), 2))
+        contacts = np.zeros((len(steps), 2), bool)
+        if with_contacts:
+            margin = round(params.contact_margin_s * layout.rate_hz)
+            contacts = settled_contacts(trajectory.contacts, margin)[steps]
         parts[trajectory.source in test_sources].append((x, y, origin, contacts))
 
     def stack(side: bool) -> tuple[np.ndarray, ...]:

@@ -85,6 +85,7 @@ class FeaturesParams:
     windows: dict[str, WindowParams]
     test_fraction: float  # share of source clips (each with its mirror) held out
     split_seed: int
+    contact_margin_s: float  # carried contact flags drop this long around every switch
 
 
 @dataclasses.dataclass(frozen=True)

@@ -159,6 +159,17 @@ def test_split_keeps_mirrors_with_their_clip_and_does_not_leak(params):
         build_dataset(clips[:2], features, "full")
 
 
+def test_settled_contacts_drop_frames_around_switches():
+    from pimann.features import settled_contacts
+
+    left = np.array([1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 0], bool)
+    flags = np.stack([left, np.ones_like(left)], axis=1)
+    settled = settled_contacts(flags, 1)
+    assert settled[:, 0].tolist() == [1, 1, 0, 0, 0, 0, 1, 1, 1, 0, 0]
+    assert settled[:, 1].all()  # never switches: the clip's ends are no switch
+    np.testing.assert_array_equal(settled_contacts(flags, 0), flags)
+
+
 def test_normalisation_uses_training_statistics_only(params, tmp_path):
     from pimann.features import write_dataset
 
@@ -186,10 +197,16 @@ def test_normalisation_uses_training_statistics_only(params, tmp_path):
     np.testing.assert_array_equal(back.x_test, dataset.x_test)
     np.testing.assert_array_equal(back.stats.y_std, dataset.stats.y_std)
     assert N_JOINTS == back.layout.n_joints
-    # each sample carries its clip's contact flags at its step (for pi_support data_contacts)
+    # each sample carries its clip's settled contact flags at its step (pi_support data_contacts)
     clip_of = dict(clips)
+    margin = round(params.features.contact_margin_s * RATE)
+    assert margin == 2
     for contacts, origin in ((back.train_contacts, back.train_origin),
                              (back.test_contacts, back.test_origin)):  # fmt: skip
-        expected = [clip_of[dataset.clips[k]].contacts[step] for k, step in origin]
+        expected = []
+        for k, step in origin:
+            raw = clip_of[dataset.clips[k]].contacts
+            around = raw[max(step - margin, 0) : step + margin + 1]
+            expected.append(around.all(axis=0))  # down on every frame within the margin
         np.testing.assert_array_equal(contacts, np.array(expected))
     assert back.train_contacts.all(-1).any() and not back.train_contacts.all()
