@@ -107,6 +107,12 @@ def _inside(opti: ca.Opti, points, weight, centres, yaws, half) -> None:
     opti.subject_to(opti.bounded(-weight * half[1], local_y, weight * half[1]))
 
 
+def knot_times(plan: FootstepPlan, params: SimulateParams) -> np.ndarray:
+    """The plan's (n+1,) time knots: every plan_dt over the footstep plan's duration."""
+    n = int(np.ceil(plan.duration / params.plan_dt))
+    return np.arange(n + 1) * params.plan_dt
+
+
 def plan_dcm(
     plan: FootstepPlan,
     params: SimulateParams,
@@ -115,8 +121,8 @@ def plan_dcm(
 ) -> DCMPlan:
     """Solve the ZMP/CoM QP over the footstep plan; `com0` is the robot's initial CoM (3,)."""
     dt = params.plan_dt
-    n = int(np.ceil(plan.duration / dt))
-    time = np.arange(n + 1) * dt
+    time = knot_times(plan, params)
+    n = len(time) - 1
     omega = float(np.sqrt(GRAVITY / params.com_height))
     a, b = lipm_matrices(omega, dt)
     support = np.array(

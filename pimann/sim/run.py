@@ -23,7 +23,8 @@ import pinocchio as pin
 
 from pimann.params import SimulateParams
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot, load_robot
-from pimann.sim.dcm import DCMPlan, plan_dcm
+from pimann.sim.com_reference import com_reference
+from pimann.sim.dcm import DCMPlan, knot_times, plan_dcm
 from pimann.sim.footsteps import FootstepPlan, extract_footsteps
 from pimann.sim.model import SimModel, build_sim_model
 from pimann.sim.synthetic import standing_feet
@@ -246,7 +247,10 @@ def simulate_trajectory(
     robot = load_robot("simulation")
     q0 = standing_pose(robot, params)
     plan = extract_footsteps(robot, trajectory, params, standing_feet(robot, q0))
-    dcm = plan_dcm(plan, params, pin.centerOfMass(robot.model, robot.data, q0))
+    reference = None
+    if params.plan_com_weight > 0:  # the generated CoM, kept close by the DCM plan
+        reference = com_reference(robot, trajectory, plan, params, knot_times(plan, params))
+    dcm = plan_dcm(plan, params, pin.centerOfMass(robot.model, robot.data, q0), reference)
     return simulate_plan(
         plan, dcm, params, q0, _posture_from_trajectory(trajectory, plan), duration, robot
     )
