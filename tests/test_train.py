@@ -113,7 +113,9 @@ def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
     contacts = dataclasses.replace(
         params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
     )
-    lower = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    lower = dataclasses.replace(
+        params, train=dataclasses.replace(params.train, pi_support="lower_sole", epochs=1)
+    )
     train_models(dataset_path, tmp_path / "contacts", 1.0, [0], contacts, "cpu")
     train_models(dataset_path, tmp_path / "lower", 1.0, [0], lower, "cpu")
     a, b = _weights(tmp_path / "contacts" / "0"), _weights(tmp_path / "lower" / "0")
