@@ -7,6 +7,8 @@ import pytest
 
 from pimann.params import EvaluateParams, SimulateParams, load_params
 from pimann.robot import Robot, load_robot
+from pimann.sim.synthetic import standing_feet
+from pimann.sim.wbc import standing_pose
 
 # The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
 EVALUATE_PARAMS = EvaluateParams(
@@ -34,6 +36,13 @@ def sim_robot() -> Robot:
 @pytest.fixture(scope="session")
 def sim_params() -> SimulateParams:
     return load_params().simulate
+
+
+@pytest.fixture(scope="session")
+def stance(sim_robot, sim_params) -> tuple[np.ndarray, np.ndarray]:
+    """The simulation robot's standing configuration and its feet (x, y, yaw)."""
+    q0 = standing_pose(sim_robot, sim_params)
+    return q0, standing_feet(sim_robot, q0)
 
 
 @pytest.fixture

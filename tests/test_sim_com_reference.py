@@ -15,17 +15,10 @@ from pimann.sim.com_reference import com_reference
 from pimann.sim.dcm import knot_times, lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import extract_footsteps, relative
 from pimann.sim.run import simulate_trajectory
-from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
-from pimann.sim.wbc import standing_pose
+from pimann.sim.synthetic import stepping_plan, stepping_trajectory
 from pimann.trajectory import Trajectory
 
 WEIGHT = 1.0  # the tests' own CoM weight (params.yaml's today), not read from params.yaml
-
-
-@pytest.fixture(scope="module")
-def stance(sim_robot, sim_params):
-    q0 = standing_pose(sim_robot, sim_params)
-    return q0, standing_feet(sim_robot, q0)
 
 
 @pytest.fixture(scope="module")

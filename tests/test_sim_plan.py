@@ -13,14 +13,8 @@ from pimann.errors import PimannError
 from pimann.rotations import rot_z
 from pimann.sim.dcm import lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import clean_contacts, extract_footsteps, relative
-from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
-from pimann.sim.wbc import SOLE_HEIGHT, standing_pose
-
-
-@pytest.fixture(scope="module")
-def stance(sim_robot, sim_params):
-    q0 = standing_pose(sim_robot, sim_params)
-    return q0, standing_feet(sim_robot, q0)
+from pimann.sim.synthetic import stepping_plan, stepping_trajectory
+from pimann.sim.wbc import SOLE_HEIGHT
 
 
 @pytest.fixture(scope="module")
