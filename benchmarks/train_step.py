@@ -17,16 +17,15 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from concurrent.futures import ProcessPoolExecutor
-from multiprocessing import get_context
 
-import numpy as np
 import torch
 
 from pimann.mann import MANN
+from pimann.parallel import pool_map
 from pimann.params import load_params
 from pimann.physics_loss import PhysicsInformedLoss
 from pimann.robot import load_robot
+from pimann.train import seed_groups
 
 INPUT_DIM, OUTPUT_DIM = 130, 100
 # output layout used here only to feed the PI loss: 7 future base linear and 7 angular
@@ -118,11 +117,9 @@ def whole_machine(seconds: float) -> None:
     print(f"whole machine ({cores} cores), 5 seeds, batch 32, MSE + PI, wall clock:")
     one = _ensemble_rate((seeds, cores, seconds, 0.0))
     print(f"  1 process x {cores} threads: {one:8.0f} model-samples/s")
-    groups = [list(map(int, g)) for g in np.array_split(np.array(seeds), workers)]
-    with ProcessPoolExecutor(workers, mp_context=get_context("spawn")) as pool:
-        start_at = time.time() + 15.0  # after every worker has built its model
-        jobs = [(group, 1, seconds, start_at) for group in groups]
-        split = sum(pool.map(_ensemble_rate, jobs))
+    start_at = time.time() + 15.0  # after every worker has built its model
+    jobs = [(group, 1, seconds, start_at) for group in seed_groups(seeds, workers)]
+    split = sum(pool_map(_ensemble_rate, jobs, workers, "workers"))
     print(f"  {workers} processes x 1 thread: {split:8.0f} model-samples/s ({split / one:.2f}x)")
     best = max(one, split)
     hours = EPOCHS * SAMPLES / best / 3600

@@ -312,6 +312,7 @@ def build_dataset(
     with_contacts = all(t.contacts is not None for _, t in clips)
     if not with_contacts:
         log.info("not every clip has contacts: the dataset carries none")
+    margin = round(params.contact_margin_s * layout.rate_hz)
     parts: dict[bool, list[tuple[np.ndarray, ...]]] = {False: [], True: []}
     for k, (name, trajectory) in enumerate(clips):
         x, y, steps = clip_features(trajectory, layout)
@@ -320,7 +321,6 @@ def build_dataset(
         origin = np.stack([np.full(len(steps), k), steps], axis=1)
         contacts = np.zeros((len(steps), 2), bool)
         if with_contacts:
-            margin = round(params.contact_margin_s * layout.rate_hz)
             contacts = settled_contacts(trajectory.contacts, margin)[steps]
         parts[trajectory.source in test_sources].append((x, y, origin, contacts))
 

@@ -79,6 +79,11 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
+def seed_groups(seeds: list[int], workers: int) -> list[list[int]]:
+    """The seeds split into `workers` contiguous groups of near-equal size, one per process."""
+    return [list(map(int, group)) for group in np.array_split(np.array(seeds), workers)]
+
+
 def _dropout_seed(seed: int, epoch: int) -> int:
     """A member's dropout seed in one epoch (so resuming needs no saved RNG state)."""
     return int(np.random.SeedSequence([seed, epoch, 0x5EED]).generate_state(1)[0])
@@ -186,8 +191,9 @@ def _evaluate(
         for start in range(0, len(x), batch):
             xb = x[start : start + batch].expand(model.ensemble, -1, -1)
             yb = y[start : start + batch].expand(model.ensemble, -1, -1)
-            cb = None if contacts is None else contacts[start : start + batch]
-            cb = None if cb is None else cb.expand(model.ensemble, -1, -1)
+            cb = None
+            if contacts is not None:
+                cb = contacts[start : start + batch].expand(model.ensemble, -1, -1)
             mse, pi = loss(model(xb), yb, with_pi, cb)
             totals += torch.stack([mse, pi]) * xb.shape[1]
     model.train()
@@ -254,7 +260,7 @@ def _train(
             dataset_path, "has no contact flags, which train.pi_support data_contacts needs"
         )
     workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds)))
-    groups = [list(map(int, g)) for g in np.array_split(np.array(seeds), workers)]
+    groups = seed_groups(seeds, workers)
     threads = max(1, torch.get_num_threads() // workers)
     jobs = [
         _GroupJob(dataset_path, group, pi_weight, params, str(device), checkpoint_dir,
@@ -342,10 +348,12 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         torch.as_tensor(a, dtype=torch.float32, device=device)
         for a in (data.x_train, data.y_train, data.x_test, data.y_test)
     )
-    c_train, c_test = (
-        None if c is None else torch.as_tensor(c, dtype=torch.bool, device=device)
-        for c in (data.train_contacts, data.test_contacts)
-    )
+    c_train = c_test = None  # the data's contacts, loaded only where L_B uses them
+    if config.pi_support == "data_contacts":
+        c_train, c_test = (
+            None if c is None else torch.as_tensor(c, dtype=torch.bool, device=device)
+            for c in (data.train_contacts, data.test_contacts)
+        )
     n, batch = len(x_train), config.batch_size
     batches = math.ceil(n / batch)
     weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)

@@ -16,14 +16,8 @@ from pimann.errors import PimannError
 from pimann.params import SimulateParams
 from pimann.robot import Robot
 from pimann.sim.dcm import SHIFT_MAX
-from pimann.sim.footsteps import FootstepPlan, sole_trajectories
+from pimann.sim.footsteps import FootstepPlan, mid_feet, sole_trajectories
 from pimann.trajectory import Trajectory
-
-
-def _mid_feet(feet: np.ndarray) -> np.ndarray:
-    """(..., 2 feet, 3) sole x, y, yaw -> (..., 3) the pose midway between the feet."""
-    yaw = np.angle(np.exp(1j * feet[..., 2]).mean(axis=-1))
-    return np.concatenate([feet[..., :2].mean(axis=-2), yaw[..., None]], axis=-1)
 
 
 def _rotate(xy: np.ndarray, yaw: np.ndarray) -> np.ndarray:
@@ -46,7 +40,7 @@ def generated_com_offsets(robot: Robot, trajectory: Trajectory) -> np.ndarray:
             trajectory.joint_positions[k],
         )
         com[k] = pin.centerOfMass(robot.model, robot.data, q)[:2]
-    mid = _mid_feet(sole_trajectories(robot, trajectory))
+    mid = mid_feet(sole_trajectories(robot, trajectory))
     return _rotate(com - mid[:, :2], -mid[:, 2])
 
 
@@ -99,5 +93,5 @@ def com_reference(
         weight[times > end] = 0.0
     feet = np.array([[(*pose[:2], yaw) for pose, yaw in (plan.foot_pose(s, t) for s in (0, 1))]
                      for t in times])  # fmt: skip
-    mid = _mid_feet(feet)
+    mid = mid_feet(feet)
     return mid[:, :2] + _rotate(weight[:, None] * offset, mid[:, 2])

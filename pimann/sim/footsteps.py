@@ -105,9 +105,15 @@ def relative(pose: np.ndarray, other: np.ndarray) -> np.ndarray:
     return np.array([c * dx + s * dy, -s * dx + c * dy, float(_wrap(other[2] - pose[2]))])
 
 
+def mid_feet(feet: np.ndarray) -> np.ndarray:
+    """(..., 2 feet, 3) sole x, y, yaw -> (..., 3) the pose midway between the feet."""
+    yaw = np.angle(np.exp(1j * feet[..., 2]).mean(axis=-1))
+    return np.concatenate([feet[..., :2].mean(axis=-2), yaw[..., None]], axis=-1)
+
+
 def _stance(feet: np.ndarray) -> tuple[np.ndarray, float]:
     """The mid-feet pose and half the lateral distance between the feet (2, 3)."""
-    mid = np.array([*feet[:, :2].mean(axis=0), _mean_angle(feet[:, 2])])
+    mid = mid_feet(feet)
     return mid, 0.5 * (relative(mid, feet[0])[1] - relative(mid, feet[1])[1])
 
 
