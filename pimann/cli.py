@@ -17,6 +17,7 @@ from pathlib import Path
 from pimann.errors import PimannError
 
 EXIT_BAD_INPUT = 2
+SKELETON_HELP = "BVH skeleton: a key of params data.skeletons (default: auto, recognised)"
 
 
 def _params(args: argparse.Namespace):
@@ -26,13 +27,14 @@ def _params(args: argparse.Namespace):
 
 
 def _skeleton(args: argparse.Namespace):
-    params = _params(args)
-    name = args.skeleton or params.data.skeleton
-    if name not in params.data.skeletons:
-        raise PimannError(
-            args.params, f"unknown skeleton {name!r}; known: {sorted(params.data.skeletons)}"
-        )
-    return params.data.skeletons[name]
+    """The BVH name map `--skeleton` picks from params data.skeletons; None: recognise."""
+    if args.skeleton in (None, "auto"):
+        return None
+    skeletons = _params(args).data.skeletons
+    if args.skeleton not in skeletons:
+        known = ", ".join(["auto", *sorted(skeletons)])
+        raise PimannError(args.params, f"unknown skeleton {args.skeleton!r}; known: {known}")
+    return skeletons[args.skeleton]
 
 
 def cmd_mocap_info(args: argparse.Namespace) -> None:
@@ -48,7 +50,7 @@ def cmd_retarget(args: argparse.Namespace) -> None:
     from pimann.trajectory import write_trajectory
 
     params = _params(args)
-    motion = read_mocap(args.file, _skeleton(args))
+    motion = read_mocap(args.file, _skeleton(args), args.rate)
     trajectory = retarget_motion(motion, params.retarget)
     if args.mirror:
         trajectory = mirror_trajectory(trajectory)
@@ -122,20 +124,23 @@ def _parser() -> argparse.ArgumentParser:
 
     info = add("mocap-info", cmd_mocap_info, "format, frames, rate, duration, segments as JSON")
     info.add_argument("file", type=Path)
-    info.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+    info.add_argument("--skeleton", help=SKELETON_HELP)
 
     retarget = add("retarget", cmd_retarget, "retarget one mocap file to a trajectory file")
     retarget.add_argument("file", type=Path)
     retarget.add_argument("-o", "--output", type=Path, required=True)
     retarget.add_argument("--mirror", action="store_true", help="mirror across the sagittal plane")
-    retarget.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+    retarget.add_argument("--skeleton", help=SKELETON_HELP)
+    retarget.add_argument(
+        "--rate", type=float, metavar="HZ", help="BVH frame rate, overriding the header's"
+    )
 
     render = add("render", cmd_render, "draw a trajectory to .gif, .mp4 or a .png strip")
     render.add_argument("file", type=Path)
     render.add_argument("-o", "--output", type=Path, required=True)
     render.add_argument("--group", help="clip group inside a collection file")
     render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
-    render.add_argument("--skeleton", help="BVH skeleton name in params.yaml data.skeletons")
+    render.add_argument("--skeleton", help=SKELETON_HELP)
 
     generate = add("generate", cmd_generate, "roll a trained model out on one scenario")
     generate.add_argument("model_dir", type=Path)

@@ -1,7 +1,7 @@
 """Foot contact on generated trajectories: a Schmitt trigger on each sole's lowest corner.
 
 Generated trajectories carry no contact forces, so contact is inferred from geometry (SPEC 1):
-the lowest of the four sole corners (`CONTACT_CORNERS`, in the sole frame) is compared with an
+the lowest of the four sole corners (`SOLE_CORNERS`, in the sole frame) is compared with an
 on and an off height, and a switch happens only once its condition has held for
 `contact_switch_time`, so a foot grazing the threshold does not chatter. The same
 `SchmittTrigger` serves the autoregressive generator (one step at a time) and whole
@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from pimann.errors import PimannError, require_finite
 from pimann.params import EvaluateParams, load_params
-from pimann.robot import CONTACT_CORNERS, LEFT_SOLE, RIGHT_SOLE, Robot
+from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SOLE_CORNERS, Robot
 from pimann.trajectory import Trajectory
 
 FEET = (LEFT_SOLE, RIGHT_SOLE)  # the column order of every (T, 2, ...) foot array
@@ -139,7 +139,7 @@ class FootKinematics:
 
 
 def lowest_corner_heights(
-    positions: np.ndarray, rotations: np.ndarray, corners: np.ndarray = CONTACT_CORNERS
+    positions: np.ndarray, rotations: np.ndarray, corners: np.ndarray = SOLE_CORNERS
 ) -> np.ndarray:
     """Height of the lowest corner: min over corners c of z(p + R c), vectorised over frames."""
     return positions[..., 2] + np.min(rotations[..., 2, :] @ corners.T, axis=-1)

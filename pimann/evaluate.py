@@ -724,7 +724,7 @@ def claims_markdown(claims: Sequence[Claim], provenance: dict[str, Any]) -> str:
 
 
 def _header_provenance(provenance: dict[str, Any]) -> dict[str, Any]:
-    return {k: provenance.get(k) for k in ("profile", "epochs", "clips", "max_clips", "seeds")}
+    return {k: provenance.get(k) for k in ("profile", "epochs", "clips", "max_takes", "seeds")}
 
 
 # ----------------------------------------------------------------------------- provenance, all
@@ -744,7 +744,7 @@ def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[s
         "profile": params.profile,
         "epochs": epochs[0] if len(epochs) == 1 else (epochs or params.train.epochs),
         "clips": clips[0] if len(clips) == 1 else (clips or None),
-        "max_clips": params.data.max_clips,
+        "max_takes": {name: source.max_takes for name, source in params.data.sources.items()},
         "seeds": seeds or list(params.train.seeds),  # those rolled out, else the params'
         "pi_weights": list(params.train.pi_weights),
         "scenario": params.figures.scenario,

@@ -70,7 +70,7 @@ from pimann.params import (
     load_params,
 )
 from pimann.robot import (
-    CONTACT_CORNERS,
+    SOLE_CORNERS,
     STANDING_BASE_HEIGHT,
     STANDING_BASE_QUATERNION_XYZW,
     STANDING_JOINTS,
@@ -147,10 +147,10 @@ class _Odometry:
         self.data = robot.model.createData()  # private: the cached Robot's data may be in use
         self.frame_ids = [robot.frame_id(name) for name in FEET]
         self.q = robot.configuration(np.zeros(3), [0.0, 0.0, 0.0, 1.0], STANDING_JOINTS)
-        self.corners_h = np.hstack([CONTACT_CORNERS, np.ones((len(CONTACT_CORNERS), 1))]).T
+        self.corners_h = np.hstack([SOLE_CORNERS, np.ones((len(SOLE_CORNERS), 1))]).T
         self.support: tuple[int, int] | None = None
         self.anchor = np.zeros(3)
-        self.world_corners = np.zeros((2, len(CONTACT_CORNERS), 3))
+        self.world_corners = np.zeros((2, len(SOLE_CORNERS), 3))
 
     def corners_in_base(self, joints: np.ndarray) -> np.ndarray:
         """(2, C, 3) sole corners in the base frame, one FK pass over the two sole frames."""

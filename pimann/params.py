@@ -23,22 +23,36 @@ DEFAULT_PARAMS = REPO_ROOT / "params.yaml"
 
 @dataclasses.dataclass(frozen=True)
 class SkeletonParams:
-    """How one BVH skeleton maps onto the 13 XSens segments."""
+    """A BVH skeleton's joint names for the 13 XSens segments (and the toes contact watches).
+
+    Only names: every axis convention is calibrated from the motion itself (pimann.mocap.
+    skeletons), and the skeletons of the common conventions are recognised without an entry.
+    """
 
     segments: dict[str, str]  # XSens segment -> BVH joint
-    axes: dict[str, list[str]]  # XSens segment -> its x, y, z axes in BVH joint-local axes
-    foot_pitch_deg: float  # extra pitch that makes the BVH foot flat
-    unit_to_m: float  # BVH length unit in metres
+    toes: dict[str, str] | None  # LeftFoot/RightFoot -> toe joint; None: the foot's child/end
+    unit_to_m: float | None  # BVH length unit in metres; None: told from the leg length
+
+
+@dataclasses.dataclass(frozen=True)
+class SourceParams:
+    """One mocap source of the data set: files, skeleton, labels, selection, cutting."""
+
+    path: str  # glob of files, relative to the shared folder unless absolute
+    skeleton: str  # `auto` (recognised from the joint names) or a key of data.skeletons
+    labels: Literal["bandai_namco", "motion"]  # content labels: the dataset's JSON, or none
+    contents: list[str] | None  # labelled contents kept (bandai_namco labels); None: all
+    styles: list[str] | None  # labelled styles kept; None: all
+    rate_hz: float | None  # overrides the files' frame rate; None: as the file says
+    clip_s: float | None  # takes longer than this are cut into clips (at pauses if any)
+    max_speed: float | None  # m/s of the person's pelvis: faster stretches are left out
+    max_takes: int | None  # at most this many files, spread over contents and styles
 
 
 @dataclasses.dataclass(frozen=True)
 class DataParams:
-    mocap_root: str  # relative to the shared folder unless absolute
-    skeleton: str
-    skeletons: dict[str, SkeletonParams]
-    contents: list[str]
-    styles: list[str] | None  # None: every style
-    max_clips: int | None  # None: every clip that matches
+    sources: dict[str, SourceParams]
+    skeletons: dict[str, SkeletonParams]  # name maps of skeletons `auto` does not know
     mirror: bool
 
 
@@ -46,6 +60,8 @@ class DataParams:
 class RetargetParams:
     rate_hz: float
     pelvis_gain: float
+    pelvis_position_weight: float  # scaled pelvis position: yields to the planted feet
+    pelvis_orientation_weight: float
     segment_gain: float
     segment_weight: float
     trunk_weight: float
@@ -54,16 +70,22 @@ class RetargetParams:
     iterations_per_frame: int
     solver: str
     flat_feet: bool
-    hold_stance_heading: bool
-    stance_foot_weight: float
-    double_support_weight: float
+    stance_weight: float  # sole pose cost of a planted foot (it stays where it was put)
+    swing_weight: float  # sole pose cost of a swinging foot
+    swing_clearance: float  # m, least mid-swing sole height
+    lift_height: float  # m, a sole rises this high before it moves (sinks from it to land)
     head_from_t8: bool
     elbow_hinge: bool
     min_leg_roll_spread: float
     min_shoulder_roll: float
     min_foot_spacing: float
-    contact_height: float
-    contact_speed: float
+    contact_height: float  # m above its floor: a heel or toe point this low ...
+    contact_speed: float  # m/s ... and this slow is down
+    release_height: float  # m: it is up again above this ...
+    release_speed: float  # m/s ... or faster than this
+    release_travel: float  # m ... or farther than this from where it came down
+    min_contact_s: float  # s, shorter contacts are dropped
+    min_swing_s: float  # s, shorter lifts are filled
     workers: int
 
 
@@ -203,8 +225,6 @@ class SimulateParams:
     com_height: float  # m, LIPM height and IK CoM height
     zmp_hold_s: float  # s of double support before the first step
     end_hold_s: float  # s of double support after the last step
-    foot_half_length: float  # m, support rectangle in the sole frame (x forward)
-    foot_half_width: float
     zmp_margin: float  # m kept inside the support rectangle by the plan
     plan_dt: float  # s, DCM/ZMP plan discretisation
     plan_zmp_weight: float  # ZMP toward the support centre
@@ -341,12 +361,13 @@ def load_params(path: str | Path = DEFAULT_PARAMS) -> Params:
         raise PimannError(path, f"profile {profile!r} is not one of profiles {sorted(profiles)}")
     _apply_overrides(raw, profiles[profile], path)
     params = _build(Params, raw, "", path)
-    if params.data.skeleton not in params.data.skeletons:
-        raise PimannError(
-            path,
-            f"unknown skeleton {params.data.skeleton!r} in data.skeleton; "
-            f"known: {sorted(params.data.skeletons)}",
-        )
+    for name, source in params.data.sources.items():
+        if source.skeleton != "auto" and source.skeleton not in params.data.skeletons:
+            raise PimannError(
+                path,
+                f"unknown skeleton {source.skeleton!r} in data.sources.{name}.skeleton; "
+                f"known: auto, {', '.join(sorted(params.data.skeletons)) or '(none)'}",
+            )
     return params
 
 

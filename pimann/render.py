@@ -31,8 +31,8 @@ from pimann.contacts import detect_contacts, trajectory_configurations
 from pimann.errors import PimannError
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_human
-from pimann.params import SkeletonParams, load_params
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, load_robot
+from pimann.params import SkeletonParams
+from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot, load_robot
 from pimann.trajectory import Trajectory, read_trajectory
 
 log = logging.getLogger(__name__)
@@ -45,9 +45,8 @@ BACKGROUND = "#ffffff"
 GRID_COLOUR = "#b8b8b8"
 PATH_COLOUR = "#2ca02c"
 
-# ergoCub's sole: two 0.117 x 0.1 m boxes (simulation URDF); SPEC 1's odometry corners.
-FOOT_HALF_EXTENTS = (0.118, 0.05)
-FOOT_CORNERS = np.array([[1, 1, 0], [1, -1, 0], [-1, -1, 0], [-1, 1, 0]]) * [*FOOT_HALF_EXTENTS, 0]
+# ergoCub's sole (pimann.robot), corners in drawing order around the rectangle
+FOOT_CORNERS = SOLE_CORNERS[[0, 1, 3, 2]]
 ROBOT_HEAD_TOP = np.array([0.0, 0.0, 0.2])  # head frame (z up) to the top of the head, m
 
 # Human end points in segment frames (XSens T-pose convention: x forward, y left, z up), for
@@ -481,7 +480,7 @@ def render_file(
     **options,
 ) -> Path:
     """`pimann render`: a trajectory file (one group of a collection), optionally beside the
-    mocap clip it came from (read with `skeleton`, default: params' `data.skeleton`), to a
+    mocap clip it came from (read with `skeleton`, default: recognised from its joints), to a
     picture. A mirrored trajectory gets the mirrored person. `options` go to
     `render_trajectory`."""
     trajectory = read_trajectory(trajectory_path, group)
@@ -489,9 +488,6 @@ def render_file(
     if mocap_path is not None:
         from pimann.mocap.io import read_mocap
 
-        if skeleton is None:
-            data = load_params().data
-            skeleton = data.skeletons[data.skeleton]
         human = read_mocap(mocap_path, skeleton)
         if bool(trajectory.attrs.get("mirrored", False)) != human.mirrored:
             human = mirror_human(human)

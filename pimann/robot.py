@@ -50,8 +50,20 @@ LEFT_SOLE = "l_sole"
 RIGHT_SOLE = "r_sole"
 CHEST_FRAME = "chest"
 
-# Sole corners (sole frame, m) used for contact detection on generated trajectories.
-CONTACT_CORNERS = np.array([[x, y, 0.0] for x in (0.08, -0.08) for y in (0.03, -0.03)])
+# The one foot geometry of every stage: ergoCub's sole is the rectangle spanned by the two
+# foot collision boxes of the simulation URDF, +-0.118 m long and +-0.05 m wide about the
+# sole frame. Retargeting pins it, generation rolls on it, contacts and metrics watch its
+# lowest corner, MuJoCo collides with it and the renderer draws it. (The authors' evaluation
+# used smaller corners, +-0.08 x +-0.03 m; for a flat foot both give the same heights.)
+SOLE_HALF_LENGTH = 0.118
+SOLE_HALF_WIDTH = 0.05
+SOLE_CORNERS = np.array(
+    [
+        [x, y, 0.0]
+        for x in (SOLE_HALF_LENGTH, -SOLE_HALF_LENGTH)
+        for y in (SOLE_HALF_WIDTH, -SOLE_HALF_WIDTH)
+    ]
+)
 
 MODEL_FILES = {
     "retarget": "ergoCubGazeboV1_xsens/ergoCubGazeboV1_xsens.urdf",

@@ -18,7 +18,7 @@ from pimann.contacts import (
 )
 from pimann.errors import PimannError
 from pimann.params import EvaluateParams
-from pimann.robot import CONTACT_CORNERS
+from pimann.robot import SOLE_CORNERS
 from pimann.trajectory import Trajectory
 
 PARAMS = EVALUATE_PARAMS
@@ -104,7 +104,7 @@ def test_corner_heights_match_pinocchio(robot, rng):
     for k, q in enumerate(configurations):
         for f, frame in enumerate(FEET):
             placement = robot.frame_placement(q, frame)
-            corner_z = [placement.act(c)[2] for c in CONTACT_CORNERS]
+            corner_z = [placement.act(c)[2] for c in SOLE_CORNERS]
             assert kinematics.heights[k, f] == pytest.approx(min(corner_z), abs=1e-12)
             np.testing.assert_allclose(kinematics.positions[k, f], placement.translation)
     np.testing.assert_allclose(

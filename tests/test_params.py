@@ -24,7 +24,10 @@ def test_repository_params_load():
     params = load_params()
     assert params.profile in ("quick", "paper")
     assert params.retarget.rate_hz == 50.0
-    assert params.data.skeleton in params.data.skeletons
+    assert all(
+        s.skeleton == "auto" or s.skeleton in params.data.skeletons
+        for s in params.data.sources.values()
+    )
 
 
 def test_typo_is_named(tmp_path, raw):
@@ -46,26 +49,32 @@ def test_wrong_type_is_named(tmp_path, raw):
 
 
 def test_unknown_skeleton_is_named(tmp_path, raw):
-    raw["data"]["skeleton"] = "cmu"
-    with pytest.raises(PimannError, match="unknown skeleton 'cmu'"):
+    raw["data"]["sources"]["reactidle"]["skeleton"] = "cmu"
+    with pytest.raises(PimannError, match="unknown skeleton 'cmu' in data.sources.reactidle"):
         load_params(_write(tmp_path, raw))
 
 
 def test_profile_overrides_only_named_keys(tmp_path, raw):
-    raw["profiles"]["quick"] = {"data.max_clips": 3}
+    raw["profiles"]["quick"] = {"data.sources.bandai_namco.max_takes": 3}
     raw["profile"] = "quick"
     quick = load_params(_write(tmp_path, raw))
     raw["profile"] = "paper"
     paper = load_params(_write(tmp_path, raw))
-    assert quick.data.max_clips == 3
-    assert paper.data.max_clips == raw["data"]["max_clips"]
+    assert quick.data.sources["bandai_namco"].max_takes == 3
+    assert (
+        paper.data.sources["bandai_namco"].max_takes
+        == (raw["data"]["sources"]["bandai_namco"]["max_takes"])
+    )
+    assert quick.data.sources["reactidle"] == paper.data.sources["reactidle"]
     assert quick.retarget == paper.retarget
 
 
 def test_bad_profile_override_is_named(tmp_path, raw):
-    raw["profiles"]["quick"] = {"data.max_clip": 3}
+    raw["profiles"]["quick"] = {"data.sources.bandai_namco.max_take": 3}
     raw["profile"] = "quick"
-    with pytest.raises(PimannError, match="profile override 'data.max_clip' names no key"):
+    with pytest.raises(
+        PimannError, match="profile override 'data.sources.bandai_namco.max_take' names no key"
+    ):
         load_params(_write(tmp_path, raw))
 
 

@@ -8,14 +8,13 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.mocap.bvh import read_bvh
+from pimann.mocap.clips import read_take, take_of
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample
 from pimann.params import load_params
 from pimann.paths import mocap_dir
 from pimann.retarget import retarget_motion
 from pimann.retarget.ik import RetargetIK
-from pimann.retarget.odometry import odometry_base_positions
 from pimann.retarget.quality import frame_measures, summarize
 from pimann.robot import SEGMENTS, STANDING_JOINTS
 
@@ -84,33 +83,17 @@ def test_ik_keeps_the_inequalities(robot, params):
     assert np.all(joints >= robot.joint_lower - 1e-9) and np.all(joints <= robot.joint_upper + 1e-9)
 
 
-def test_odometry_closed_form():
-    """Foot offsets from a base moving at 1 m/s: an anchored foot pins the base."""
-    n = 6
-    offsets = np.zeros((n, 2, 3))
-    offsets[:, 0] = [[0.2 - 0.05 * t, 0.1, -0.7] for t in range(n)]  # left foot drifts back
-    offsets[:, 1] = [[-0.2 + 0.05 * t, -0.1, -0.7] for t in range(n)]
-    contacts = np.array([[1, 0], [1, 0], [1, 1], [0, 1], [0, 1], [0, 0]], bool)
-    fallback = np.array([[0.02 * t, 0.0, 0.9] for t in range(n)])
-    lowest = np.minimum(offsets[:, 0, 2], offsets[:, 1, 2]) - 0.01 * np.arange(n)
-    base = odometry_base_positions(offsets, contacts, fallback, lowest)
-    left_world = base + offsets[:, 0]
-    right_world = base + offsets[:, 1]
-    np.testing.assert_allclose(left_world[:3, :2], np.tile([0.2, 0.1], (3, 1)), atol=1e-12)
-    np.testing.assert_allclose(right_world[2:5, :2], np.tile(right_world[2, :2], (3, 1)))
-    # height: the lowest corner touches the floor
-    np.testing.assert_allclose(base[:, 2], 0.7 + 0.01 * np.arange(n), atol=1e-12)
-    # no contact: the base moves like the fallback
-    np.testing.assert_allclose(base[5, :2] - base[4, :2], [0.02, 0.0], atol=1e-12)
-
-
 @pytest.fixture(scope="module")
 def short_clip(params) -> HumanMotion:
-    skeleton = params.data.skeletons[params.data.skeleton]
-    motion = read_bvh(mocap_dir() / "bandai-namco/dataset" / REAL_CLIP, skeleton)
+    # read as its source reads it (bandai_namco: the skeleton recognised from its joint names)
+    motion = read_take(take_of(mocap_dir() / "bandai-namco/dataset" / REAL_CLIP, params.data))
     keep = slice(0, 75)  # 2.5 s: a couple of steps
     return HumanMotion(
-        motion.time[keep], motion.orientations[keep], motion.segment_positions[keep], "short"
+        motion.time[keep],
+        motion.orientations[keep],
+        motion.segment_positions[keep],
+        "short",
+        foot_points=motion.foot_points[keep],
     )
 
 
@@ -123,22 +106,15 @@ def test_retarget_keeps_the_stance_foot_still(short_clip, params):
         resample(short_clip, params.retarget.rate_hz), trajectory, params.retarget
     )
     quality = summarize([measures])
-    assert quality["stance_foot_speed_m_s"]["median"] < 0.02
-    assert quality["stance_foot_speed_m_s"]["p95"] < 0.05
+    # planted soles stay put (SPEC 3.1 asks < 0.02 and < 0.05 m/s)
+    assert quality["stance_foot_speed_m_s"]["median"] < 0.002
+    assert quality["stance_foot_speed_m_s"]["p95"] < 0.01
+    assert quality["stance_corner_speed_m_s"]["p95"] < 0.01
     assert quality["orientation_error_deg"]["Head"]["median"] < 1.0
     assert quality["orientation_error_deg"]["LeftLowerLeg"]["median"] < 10.0
     # the robot walks forward, with shorter steps than the person
     assert 0.5 < quality["speed_ratio"] < 0.95
     assert trajectory.base_position[-1, 0] - trajectory.base_position[0, 0] > 1.0
-
-
-def test_planted_foot_keeps_its_touchdown_heading():
-    from pimann.retarget.targets import hold_during_contact
-
-    yaw = np.linspace(0.0, 0.9, 10)
-    contact = np.array([0, 1, 1, 1, 0, 0, 1, 1, 0, 1], bool)
-    held = hold_during_contact(yaw, contact)
-    np.testing.assert_allclose(held, [0.0, 0.1, 0.1, 0.1, 0.4, 0.5, 0.6, 0.6, 0.8, 0.9])
 
 
 def test_retarget_file_and_its_mirror(params):

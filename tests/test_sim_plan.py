@@ -10,6 +10,7 @@ import pytest
 from scipy.spatial import ConvexHull
 
 from pimann.errors import PimannError
+from pimann.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.rotations import rot_z
 from pimann.sim.dcm import lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import clean_contacts, extract_footsteps, relative
@@ -126,9 +127,7 @@ def test_dcm_plan_is_lipm_consistent_and_supported(sim_robot, sim_params, stance
         acc = dcm.omega**2 * (x - dcm.zmp[k])
         x, v = x + h * v + 0.5 * h * h * acc, v + h * acc
     np.testing.assert_allclose(x, dcm.com[k + 1, :2], atol=1e-6)
-    half = (
-        np.array([sim_params.foot_half_length, sim_params.foot_half_width]) - sim_params.zmp_margin
-    )
+    half = np.array([SOLE_HALF_LENGTH, SOLE_HALF_WIDTH]) - sim_params.zmp_margin
     _inside_support(plan, dcm, half)
     # starts and ends at rest, the CoM moves forward with the feet, sways toward the stance foot
     np.testing.assert_allclose(dcm.com_velocity[[0, -1]], 0.0, atol=1e-9)

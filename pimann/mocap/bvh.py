@@ -1,11 +1,12 @@
-"""BVH reader: parse, forward kinematics over all frames, calibration to XSens segments.
+"""BVH reader: parse, forward kinematics over all frames, segments in XSens convention.
 
-A BVH skeleton's joint frames are not XSens segment frames: the bind pose is a T-pose in
-which each local frame is a signed permutation of the world axes (SPEC 3.1). Each segment
-is therefore calibrated as R_seg = C R_bvh P: P writes the segment's XSens x, y, z axes in
-the joint's local axes (params `axes`), C turns BVH world axes (Y up, walking along +Z,
-left at +X) into the robot's world (z up, x forward, y left). The BVH foot bone points at
-the toes, which slope down when the foot is flat, so feet get an extra pitch.
+Any skeleton: the joint names come from a built-in convention or params, the axes of every
+segment are calibrated from the motion itself (pimann.mocap.skeletons), the length unit
+is told from the leg length and the up axis from the hips-to-head direction, so each
+segment is R_seg = C R_bvh P with C turning the file's world into the robot's (z up).
+The kept libraries bvhio and pybvh were not used: calibration needs only world rotations
+and positions of all frames at once, which their per-joint object trees give slowly, and
+their own exceptions name neither the file nor the frame, so this ~100-line parser stays.
 """
 
 from __future__ import annotations
@@ -18,12 +19,10 @@ from scipy.spatial.transform import Rotation
 
 from pimann.errors import PimannError, require_finite
 from pimann.mocap.human_motion import HumanMotion
+from pimann.mocap.skeletons import BodyLandmarks, calibrate_segments, recognise_skeleton
 from pimann.params import SkeletonParams
 from pimann.robot import SEGMENTS
 
-# BVH world (X left, Y up, Z forward) -> robot world (x forward, y left, z up): p = [Z, X, Y].
-BVH_TO_WORLD = np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
-_AXIS = {"X": 0, "Y": 1, "Z": 2}
 _ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 _POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")
 
@@ -35,6 +34,7 @@ class BvhJoint:
     offset: np.ndarray  # (3,) in BVH units
     channels: list[str]
     first_channel: int  # column of its first channel in a motion line
+    end_site: np.ndarray | None = None  # (3,) offset of its End Site, if it has one
 
 
 @dataclasses.dataclass
@@ -135,8 +135,11 @@ def _parse_hierarchy(path: Path, head: str) -> list[BvhJoint]:
                 stack.pop()
                 i += 1
             elif token == "OFFSET":
+                offset = np.array([float(v) for v in tokens[i + 1 : i + 4]])
                 if stack[-1] >= 0:
-                    joints[stack[-1]].offset = np.array([float(v) for v in tokens[i + 1 : i + 4]])
+                    joints[stack[-1]].offset = offset
+                elif (owner := next((s for s in reversed(stack) if s >= 0), None)) is not None:
+                    joints[owner].end_site = offset  # an End Site: where the owner's bone ends
                 i += 4
             elif token == "CHANNELS":
                 count = int(tokens[i + 1])
@@ -188,42 +191,135 @@ def forward_kinematics(clip: BvhClip) -> tuple[np.ndarray, np.ndarray]:
     return rotations, positions
 
 
-def axis_permutation(axes: list[str], path: str | Path | None = None) -> np.ndarray:
-    """Signed permutation whose columns are the given BVH-local axes (e.g. ['Z', '-Y', 'X'])."""
+# Length units a BVH file may use, tried in this order; the first that makes the leg
+# (hip to knee to ankle) 0.45-1.3 m long is taken. CMU's converted files use 1/0.45 inch.
+LENGTH_UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "CMU unit": 0.0254 / 0.45}
+LEG_LENGTH_M = (0.45, 1.3)
+
+
+def detect_unit(path: str | Path, leg_length: float) -> float:
+    """Metres per BVH length unit, from the leg length in file units."""
+    for metres in LENGTH_UNITS.values():
+        if LEG_LENGTH_M[0] <= leg_length * metres <= LEG_LENGTH_M[1]:
+            return metres
+    raise PimannError(
+        path,
+        f"cannot tell the length unit: the leg is {leg_length:.4g} units long, a human leg in "
+        f"none of {', '.join(LENGTH_UNITS)}; set unit_to_m in params data.skeletons",
+    )
+
+
+def world_axes(up: np.ndarray) -> np.ndarray:
+    """C: the proper rotation (a signed cyclic axis permutation) taking the file's up axis,
+    the one closest to `up`, to the robot's z; which way is forward does not matter."""
+    axis = int(np.argmax(np.abs(up)))
+    sign = 1.0 if up[axis] > 0 else -1.0
     matrix = np.zeros((3, 3))
-    for column, axis in enumerate(axes):
-        name = axis.lstrip("+-")
-        if name not in _AXIS or len(axes) != 3:
-            raise PimannError(path, f"axes {axes} must be three of X, Y, Z with optional sign")
-        matrix[_AXIS[name], column] = -1.0 if axis.startswith("-") else 1.0
-    if abs(np.linalg.det(matrix)) != 1.0:
-        raise PimannError(path, f"axes {axes} repeat an axis")
-    if np.linalg.det(matrix) < 0:
-        raise PimannError(path, f"axes {axes} form a left-handed frame")
+    matrix[0, (axis + 1) % 3] = 1.0
+    matrix[1, (axis + 2) % 3] = sign
+    matrix[2, axis] = sign
     return matrix
 
 
-def segment_calibrations(skeleton: SkeletonParams) -> np.ndarray:
-    """(13, 3, 3) right-hand factor P (times the foot pitch for feet) of every segment."""
-    calibration = np.empty((len(SEGMENTS), 3, 3))
-    foot_pitch = Rotation.from_euler("y", skeleton.foot_pitch_deg, degrees=True).as_matrix()
-    for k, segment in enumerate(SEGMENTS):
-        calibration[k] = axis_permutation(skeleton.axes[segment])
-        if segment.endswith("Foot"):
-            calibration[k] = calibration[k] @ foot_pitch
-    return calibration
+def _bone_end(clip: BvhClip, rotations, positions, joint: int, what: str) -> np.ndarray:
+    """(T, 3) where the joint's bone ends: its farthest child joint, else its End Site."""
+    children = [k for k, j in enumerate(clip.joints) if j.parent == joint]
+    lengths = [np.linalg.norm(clip.joints[k].offset) for k in children]
+    if children and max(lengths) > 0:
+        return positions[:, children[int(np.argmax(lengths))]]
+    end = clip.joints[joint].end_site
+    if end is not None and np.linalg.norm(end) > 0:
+        return positions[:, joint] + rotations[:, joint] @ end
+    name = clip.joints[joint].name
+    raise PimannError(clip.path, f"joint {name!r} ({what}) has no child or End Site ending it")
 
 
-def read_bvh(path: str | Path, skeleton: SkeletonParams) -> HumanMotion:
-    """A BVH clip as XSens-convention segment orientations and positions (z up, metres)."""
-    clip = parse_bvh(path)
-    missing = [s for s in SEGMENTS if skeleton.segments.get(s) not in {j.name for j in clip.joints}]
+def _next_on_chain(clip: BvhClip, positions, start: int, end: int, min_length: float):
+    """(T, 3) the first joint on the chain from `start` up to `end` at least `min_length`
+    from `start` (the joint that moves rigidly with it, where the rig has one), else `end`."""
+    chain, joint = [], end
+    while joint not in (start, -1):
+        chain.append(joint)
+        joint = clip.joints[joint].parent
+    if joint == start:
+        for k in reversed(chain):
+            distance = np.linalg.norm(positions[:, k] - positions[:, start], axis=-1)
+            if np.median(distance) > min_length:
+                return positions[:, k]
+    return positions[:, end]
+
+
+def _check_names(clip: BvhClip, skeleton: SkeletonParams) -> None:
+    names = {j.name for j in clip.joints}
+    mapped = {s: skeleton.segments.get(s) for s in SEGMENTS}
+    mapped.update({f"{foot} toes": toe for foot, toe in (skeleton.toes or {}).items()})
+    missing = [s for s, joint in mapped.items() if joint not in names]
     if missing:
-        names = [skeleton.segments.get(s) for s in missing]
-        raise PimannError(path, f"skeleton lacks joints {names} mapped to segments {missing}")
+        joints = [mapped[s] for s in missing]
+        raise PimannError(clip.path, f"skeleton lacks joints {joints} mapped to segments {missing}")
+
+
+def bvh_landmarks(
+    clip: BvhClip, skeleton: SkeletonParams | None = None, rate_hz: float | None = None
+) -> BodyLandmarks:
+    """The segment joints' world rotations and the points calibration needs (robot axes,
+    metres); `skeleton` None: recognised from the joint names."""
+    path = clip.path
+    if skeleton is None:
+        skeleton = recognise_skeleton([j.name for j in clip.joints], path)
+    _check_names(clip, skeleton)
     rotations, positions = forward_kinematics(clip)
-    indices = [clip.joint_index(skeleton.segments[s]) for s in SEGMENTS]
-    orientations = BVH_TO_WORLD @ rotations[:, indices] @ segment_calibrations(skeleton)
-    segment_positions = positions[:, indices] @ BVH_TO_WORLD.T * skeleton.unit_to_m
-    time = np.arange(len(clip.values)) * clip.frame_time
-    return HumanMotion(time, orientations, segment_positions, source=str(path))
+    index = {s: clip.joint_index(skeleton.segments[s]) for s in SEGMENTS}
+    ids = list(index.values())
+    hip, knee, ankle = (positions[:, index["Left" + s]] for s in ("UpperLeg", "LowerLeg", "Foot"))
+    leg = float(
+        np.median(np.linalg.norm(hip - knee, axis=-1) + np.linalg.norm(knee - ankle, axis=-1))
+    )
+    unit = skeleton.unit_to_m or detect_unit(path, leg)
+    to_world = world_axes(
+        np.median(positions[:, index["Head"]] - positions[:, index["Pelvis"]], axis=0)
+    )
+
+    def world(points: np.ndarray) -> np.ndarray:
+        return points @ to_world.T * unit
+
+    toes = [
+        positions[:, clip.joint_index(skeleton.toes[foot])]
+        if skeleton.toes and foot in skeleton.toes
+        else _bone_end(clip, rotations, positions, index[foot], foot)
+        for foot in ("LeftFoot", "RightFoot")
+    ]
+    wrists = [
+        _bone_end(clip, rotations, positions, index[arm], arm)
+        for arm in ("LeftForeArm", "RightForeArm")
+    ]
+    spine = _next_on_chain(clip, positions, index["Pelvis"], index["T8"], 0.02 * leg)
+    neck = _next_on_chain(clip, positions, index["T8"], index["Head"], 0.02 * leg)
+    return BodyLandmarks(
+        rotations=to_world @ rotations[:, ids],
+        origins=world(positions[:, ids]),
+        toes=world(np.stack(toes, axis=1)),
+        wrists=world(np.stack(wrists, axis=1)),
+        spine=world(spine),
+        neck=world(neck),
+        frame_time=1.0 / rate_hz if rate_hz else clip.frame_time,
+    )
+
+
+def read_bvh(
+    path: str | Path, skeleton: SkeletonParams | None = None, rate_hz: float | None = None
+) -> HumanMotion:
+    """A BVH clip as XSens-convention segments (z up, metres) with heel and toe points.
+
+    `skeleton` None: recognised from the joint names; `rate_hz` replaces the header's
+    frame time."""
+    clip = parse_bvh(path)
+    if rate_hz is not None and not rate_hz > 0:
+        raise PimannError(path, f"rate must be positive, not {rate_hz}")
+    body = bvh_landmarks(clip, skeleton, rate_hz)
+    orientations = body.rotations @ calibrate_segments(body, path)
+    heels = body.origins[:, [SEGMENTS.index("LeftFoot"), SEGMENTS.index("RightFoot")]]
+    foot_points = np.stack([heels, body.toes], axis=2)
+    n_frames = len(clip.values)
+    time = np.arange(n_frames) / rate_hz if rate_hz else np.arange(n_frames) * clip.frame_time
+    return HumanMotion(time, orientations, body.origins, str(path), foot_points=foot_points)

@@ -1,6 +1,6 @@
 """One entry point for every mocap format: pick the reader by extension, else by content.
 
-`.bvh` -> BVH (needs a skeleton map: the one params.yaml names when none is given),
+`.bvh` -> BVH (any skeleton: a built-in convention is recognised when no map is given),
 `.mvnx` -> MVNX, anything else that is text holding `XsensSuit::vLink::` -> YARP log.
 `mocap_info` backs `pimann mocap-info FILE` (a JSON summary).
 """
@@ -44,20 +44,16 @@ def mocap_format(path: str | Path) -> str:
     )
 
 
-def _default_skeleton() -> SkeletonParams:
-    from pimann.params import load_params
-
-    data = load_params().data
-    return data.skeletons[data.skeleton]
-
-
-def read_mocap(path: str | Path, skeleton: SkeletonParams | None = None) -> HumanMotion:
-    """The 13 study segments of a mocap file of any supported format."""
+def read_mocap(
+    path: str | Path, skeleton: SkeletonParams | None = None, rate_hz: float | None = None
+) -> HumanMotion:
+    """The 13 study segments of a mocap file of any supported format. `skeleton` and
+    `rate_hz` (replacing the header's frame time) apply to BVH files only."""
     kind = mocap_format(path)
     if kind == "bvh":
         from pimann.mocap.bvh import read_bvh  # the BVH reader loads only when needed
 
-        return read_bvh(path, skeleton or _default_skeleton())
+        return read_bvh(path, skeleton, rate_hz)
     if kind == "mvnx":
         return read_mvnx(path)
     return read_yarp_log(path)

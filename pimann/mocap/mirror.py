@@ -69,6 +69,9 @@ def mirror_human(motion: HumanMotion) -> HumanMotion:
         segment_positions=mirror_points(motion.segment_positions[:, SEGMENT_PERMUTATION]),
         source=motion.source,
         mirrored=not motion.mirrored,
+        foot_points=None
+        if motion.foot_points is None
+        else mirror_points(motion.foot_points[:, ::-1]),
     )
 
 

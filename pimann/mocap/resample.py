@@ -60,10 +60,15 @@ def resample(motion: HumanMotion, rate_hz: float) -> HumanMotion:
         quaternions[lower], quaternions[upper], np.repeat(weight[:, None], n_segments, axis=1)
     )
     orientations = Rotation.from_quat(blended.reshape(-1, 4)).as_matrix()
+    foot_points = None
+    if motion.foot_points is not None:
+        w4 = weight[:, None, None, None]
+        foot_points = (1.0 - w4) * motion.foot_points[lower] + w4 * motion.foot_points[upper]
     return HumanMotion(
         time=grid,
         orientations=orientations.reshape(len(grid), n_segments, 3, 3),
         segment_positions=new_positions,
         source=motion.source,
         mirrored=motion.mirrored,
+        foot_points=foot_points,
     )

@@ -1,7 +1,8 @@
 """Whole-body geometric retargeting of human motion onto ergoCub (SPEC 3).
 
-`retarget_motion` resamples the human motion to the output rate, pre-processes the segment
-targets, runs the pink IK frame by frame, then replaces the base position by leg odometry.
+`retarget_motion` resamples the human motion to the output rate, finds the person's foot
+contacts and plans the robot's soles from them (feet.py), pre-processes the segment
+targets, then runs the pink IK frame by frame: planted soles stay put, the base follows.
 """
 
 from __future__ import annotations
@@ -14,14 +15,17 @@ import numpy as np
 import pinocchio as pin
 from pink.exceptions import PinkError
 
+from pimann.contacts import foot_kinematics
 from pimann.errors import PimannError
+from pimann.mocap.clips import Clip, Take, clip_motion, read_take, take_clips, take_of
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample
 from pimann.params import Params, RetargetParams
+from pimann.retarget.feet import human_contacts, plan_soles
 from pimann.retarget.ik import RetargetIK
-from pimann.retarget.odometry import odometry_base_positions, sole_offsets
-from pimann.retarget.targets import human_contacts, leg_length_ratio, segment_targets
+from pimann.retarget.targets import leg_length_ratio, segment_targets
 from pimann.robot import SEGMENTS, load_robot
+from pimann.rotations import rot_z, yaw_of
 from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -30,23 +34,48 @@ log = logging.getLogger(__name__)
 def solve_joints(
     motion: HumanMotion, params: RetargetParams, scale: float, contacts: np.ndarray
 ) -> np.ndarray:
-    """(T, nq) IK configurations following the motion (pelvis position scaled)."""
+    """(T, nq) IK configurations following the motion, in two passes. The first copies the
+    person (pelvis pose held, segment orientations followed): where its soles stand during
+    each contact is where the robot's own legs put its footsteps. The second pins the soles
+    on that plan (feet.py) and lets the base follow."""
     robot = load_robot("retarget")
-    ik = RetargetIK(robot, params, motion.rate_hz or params.rate_hz)
-    targets = segment_targets(motion, params, contacts)
+    rate = motion.rate_hz or params.rate_hz
     pelvis = SEGMENTS.index("Pelvis")
-    configurations = np.empty((motion.n_frames, robot.model.nq))
+    placements = [
+        pin.SE3(rotation, scale * position)
+        for rotation, position in zip(
+            motion.orientations[:, pelvis], motion.pelvis_position, strict=True
+        )
+    ]
+    targets = segment_targets(motion, params)
+    first = RetargetIK(robot, params, rate)
+    free = np.array([_solve(first, motion, t, placements[t], targets[t, 1:]) for t in
+                     range(motion.n_frames)])  # fmt: skip
+    soles = foot_kinematics(robot, free)
+    plan = plan_soles(soles.positions, yaw_of(soles.rotations), contacts, motion.time, params)
+    targets = segment_targets(motion, params, plan.headings)
+    sole_rotations = rot_z(plan.headings)
+    second = RetargetIK(robot, params, rate)
+    second.reset(free[0])
+    configurations = np.empty_like(free)
     for t in range(motion.n_frames):
-        placement = pin.SE3(targets[t, pelvis], scale * motion.pelvis_position[t])
-        try:
-            configurations[t] = ik.solve(placement, targets[t, 1:], tuple(contacts[t]))
-        except PinkError as error:  # e.g. the QP has no solution: name the clip and frame
-            raise PimannError(motion.source, f"IK failed: {error}", frame=t) from None
+        planned = tuple(pin.SE3(sole_rotations[t, k], plan.positions[t, k]) for k in range(2))
+        configurations[t] = _solve(
+            second, motion, t, placements[t], targets[t, 1:], planned, tuple(plan.weights[t])
+        )
     return configurations
 
 
+def _solve(ik: RetargetIK, motion: HumanMotion, t: int, *args) -> np.ndarray:
+    try:
+        return ik.solve(*args)
+    except PinkError as error:  # e.g. the QP has no solution: name the clip and frame
+        raise PimannError(motion.source, f"IK failed: {error}", frame=t) from None
+
+
 def retarget_motion(motion: HumanMotion, params: RetargetParams) -> Trajectory:
-    """The robot trajectory (at params.rate_hz) that imitates the human motion."""
+    """The robot trajectory (at params.rate_hz) that imitates the human motion; its contact
+    flags are the person's foot contacts, during which the robot's soles stay put."""
     if motion.n_frames < 2:
         raise PimannError(motion.source, f"too short to retarget ({motion.n_frames} frame(s))")
     if abs(motion.rate_hz - params.rate_hz) > 1e-6 * params.rate_hz:
@@ -56,12 +85,10 @@ def retarget_motion(motion: HumanMotion, params: RetargetParams) -> Trajectory:
     contacts = human_contacts(motion, params)
     log.debug("%s: %d frames, leg scale %.3f", motion.source, motion.n_frames, scale)
     configurations = solve_joints(motion, params, scale, contacts)
-    offsets, lowest = sole_offsets(robot, configurations)
-    base = odometry_base_positions(offsets, contacts, configurations[:, :3], lowest)
-    _, quaternions, joints = zip(*map(robot.split_configuration, configurations), strict=True)
+    base, quaternions, joints = zip(*map(robot.split_configuration, configurations), strict=True)
     return Trajectory(
         time=motion.time - motion.time[0],
-        base_position=base,
+        base_position=np.array(base),
         base_quaternion_xyzw=np.array(quaternions),
         joint_positions=np.array(joints),
         source=Path(motion.source).name,
@@ -71,31 +98,54 @@ def retarget_motion(motion: HumanMotion, params: RetargetParams) -> Trajectory:
     )
 
 
+def _retarget_span(
+    clip: Clip, motion: HumanMotion, params: RetargetParams
+) -> tuple[Trajectory, float]:
+    """(trajectory, CPU seconds) of a clip's motion, labelled with the clip's take; its
+    `source` is the take's file name, which keeps a take's clips on one side of the split."""
+    take = clip.take
+    start = time.process_time()
+    trajectory = retarget_motion(motion, params)
+    seconds = time.process_time() - start
+    trajectory.source = take.path.name
+    trajectory.attrs.update(
+        dataset=take.source,
+        take=take.name,
+        content=take.content or "",
+        style=take.style or "",
+        clip_start_s=clip.start_s,
+    )
+    return trajectory, seconds
+
+
 def retarget_file(path: str | Path, params: Params, mirror: bool = False) -> Trajectory:
-    """One BVH clip to a trajectory; `mirror` returns the sagittal mirror image instead.
+    """One mocap file, whole, to a trajectory (read as the source its path belongs to);
+    `mirror` returns the sagittal mirror image instead.
 
     The retargeted trajectory is mirrored in joint space (exact for ergoCub and half the
     cost of retargeting the mirrored person)."""
-    from pimann.mocap.bvh import read_bvh
     from pimann.mocap.mirror import mirror_trajectory
 
-    skeleton = params.data.skeletons[params.data.skeleton]
-    trajectory = retarget_motion(read_bvh(path, skeleton), params.retarget)
+    take = take_of(path, params.data)
+    motion = read_take(take)
+    clip = Clip(take, 0.0, motion.duration, take.name)
+    trajectory, _ = _retarget_span(clip, motion, params.retarget)
     return mirror_trajectory(trajectory) if mirror else trajectory
 
 
 def retarget_clip(
-    path: str | Path, params: Params
-) -> tuple[str, Trajectory, dict[str, np.ndarray], float]:
-    """(clip name, trajectory, per-frame quality measures, CPU seconds spent retargeting):
-    the unit of work of the retarget stage and of its speed benchmark."""
-    from pimann.mocap.bvh import read_bvh
+    take: Take, params: Params
+) -> list[tuple[str, Trajectory, dict[str, np.ndarray], float]]:
+    """The retarget stage's unit of work on one take: the file read once and cut into clips,
+    and per clip (name, trajectory, per-frame quality measures, CPU seconds retargeting)."""
     from pimann.retarget.quality import frame_measures
 
-    path = Path(path)
-    motion = read_bvh(path, params.data.skeletons[params.data.skeleton])
-    start = time.process_time()
-    trajectory = retarget_motion(motion, params.retarget)
-    seconds = time.process_time() - start
-    human = resample(motion, params.retarget.rate_hz)
-    return path.stem, trajectory, frame_measures(human, trajectory, params.retarget), seconds
+    motion = read_take(take)
+    results = []
+    for clip in take_clips(take, motion, take.clip_s, take.max_speed):
+        part = clip_motion(motion, clip)
+        trajectory, seconds = _retarget_span(clip, part, params.retarget)
+        human = resample(part, params.retarget.rate_hz)
+        measures = frame_measures(human, trajectory, params.retarget)
+        results.append((clip.name, trajectory, measures, seconds))
+    return results

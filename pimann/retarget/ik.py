@@ -1,17 +1,17 @@
 """Whole-body differential IK with pink: the robot follows the human segment orientations.
 
-Pelvis pose is a hard equality constraint; the 12 other segments are orientation-only
-costs on the robot's `data_<Segment>` frames (the robot is smaller than the person, so
-positions of limbs cannot match, orientations can). A small posture cost regularises
-redundant directions. The trunk (T8, Head) weighs more than the limbs: where an arm
+The feet follow the sole targets of feet.py (full poses): a planted sole weighs
+`stance_weight` and stays where it was put down, a swinging one `swing_weight`. The pelvis
+follows the person's pelvis orientation and the scaled pelvis position at lower weights, so
+the base goes wherever the planted feet let it (the robot's legs are shorter than the
+person's). The 10 other segments are orientation-only costs on the robot's `data_<Segment>`
+frames (the robot is smaller than the person, so positions of limbs cannot match,
+orientations can). A small posture cost regularises redundant directions. The trunk (T8,
+Head) weighs more than the limbs: where an arm
 reaches a joint limit, the chest should not tilt to make up for it. Joint limits, a minimum
 shoulder roll and a minimum lateral foot spacing (in the pelvis frame, to keep the legs
 apart: the dataset-1 actor walks with the ankles 2.6 cm apart) are QP inequalities. Each
 frame runs a few QP iterations warm-started from the previous frame's solution.
-
-Feet in contact (from the person's feet) weigh more, so a planted foot does not turn, and
-while both are down their relative pose is held: the leg odometry (odometry.py) pins the
-base to one planted foot, and this keeps the other one from sliding.
 
 pink gains are unitless per-iteration low-pass factors in (0, 1]; the paper's gains are
 rates (1/s). They are converted as gain * `gain_time_step`, capped at 1.
@@ -23,11 +23,10 @@ import numpy as np
 import pink
 import pinocchio as pin
 from pink.limits import ConfigurationLimit, Limit
-from pink.tasks import FrameTask, PostureTask, RelativeFrameTask
+from pink.tasks import FrameTask, PostureTask
 
 from pimann.params import RetargetParams
 from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot
-from pimann.rotations import yaw_only
 
 FEET = ("LeftFoot", "RightFoot")
 SHOULDER_ROLLS = ("l_shoulder_roll", "r_shoulder_roll")
@@ -75,8 +74,8 @@ class RetargetIK:
         step = params.gain_time_step
         self.pelvis_task = FrameTask(
             "data_Pelvis",
-            position_cost=1.0,
-            orientation_cost=1.0,
+            position_cost=params.pelvis_position_weight,
+            orientation_cost=params.pelvis_orientation_weight,
             gain=min(1.0, params.pelvis_gain * step),
         )
         self.segment_tasks = [
@@ -91,15 +90,11 @@ class RetargetIK:
             for segment in SEGMENTS[1:]
         ]
         self.foot_tasks = [self.segment_tasks[SEGMENTS.index(f) - 1] for f in FEET]
-        # both feet planted: their relative pose is frozen, so neither slides under odometry
-        self.feet_task = RelativeFrameTask(
-            RIGHT_SOLE,
-            LEFT_SOLE,
-            position_cost=params.double_support_weight,
-            orientation_cost=params.stance_foot_weight,
-            gain=1.0,
-        )
-        self.double_support = False
+        # the soles track their planned poses exactly each frame (gain 1)
+        self.sole_tasks = [
+            FrameTask(frame, position_cost=1.0, orientation_cost=1.0, gain=1.0)
+            for frame in (LEFT_SOLE, RIGHT_SOLE)
+        ]
         self.posture_task = PostureTask(cost=params.posture_cost)
         self.limits = [
             ConfigurationLimit(model),
@@ -114,11 +109,17 @@ class RetargetIK:
         self.posture_task.set_target(self.robot.standing_configuration())
 
     def solve(
-        self, pelvis: pin.SE3, rotations: np.ndarray, stance: tuple[bool, bool] = (False, False)
+        self,
+        pelvis: pin.SE3,
+        rotations: np.ndarray,
+        soles: tuple[pin.SE3, pin.SE3] | None = None,
+        sole_weights: tuple[float, float] = (1.0, 1.0),
     ) -> np.ndarray:
-        """One frame: pelvis pose and the 12 other segments' world rotations -> q. A foot in
-        `stance` (left, right) weighs stance_foot_weight: a planted foot should not turn; with
-        both feet planted, their relative pose stays as it was when the second one landed."""
+        """One frame: the pelvis target pose and the 12 other segments' world rotations (in
+        SEGMENTS order) -> q. Without `soles` the pelvis pose is a hard constraint and the
+        feet follow their segment targets (the first pass of retarget_motion); with the two
+        sole target poses (and their costs) the pelvis is a cost and the soles replace the
+        foot segments."""
         if self.configuration is None:
             q = self.robot.standing_configuration()
             q[:3] = pelvis.translation
@@ -128,16 +129,16 @@ class RetargetIK:
         self.pelvis_task.set_target(pelvis)
         for task, rotation in zip(self.segment_tasks, rotations, strict=True):
             task.set_target(pin.SE3(rotation, np.zeros(3)))
-        for task, planted in zip(self.foot_tasks, stance, strict=True):
-            weight = self.params.stance_foot_weight if planted else self.params.segment_weight
-            task.set_orientation_cost(weight)
-        tasks = [*self.segment_tasks, self.posture_task]
-        double_support = bool(stance[0] and stance[1])
-        if double_support and not self.double_support:
-            self.feet_task.set_target(self._flat_feet_transform())
-        if double_support:
-            tasks.append(self.feet_task)
-        self.double_support = double_support
+        if soles is None:
+            tasks, constraints = [*self.segment_tasks, self.posture_task], [self.pelvis_task]
+        else:
+            for task, target, weight in zip(self.sole_tasks, soles, sole_weights, strict=True):
+                task.set_position_cost(weight)
+                task.set_orientation_cost(weight)
+                task.set_target(target)
+            limbs = [t for t in self.segment_tasks if t not in self.foot_tasks]
+            tasks = [self.pelvis_task, *limbs, *self.sole_tasks, self.posture_task]
+            constraints = []
         for _ in range(self.params.iterations_per_frame):
             velocity = pink.solve_ik(
                 configuration,
@@ -145,17 +146,8 @@ class RetargetIK:
                 self.dt,
                 solver=self.params.solver,
                 limits=self.limits,
-                constraints=[self.pelvis_task],
+                constraints=constraints,
                 safety_break=False,
             )
             configuration.integrate_inplace(velocity, self.dt)
         return configuration.q.copy()
-
-    def _flat_feet_transform(self) -> pin.SE3:
-        """Right sole in the left sole's frame, both feet laid flat on the floor."""
-        flat = []
-        for frame in (LEFT_SOLE, RIGHT_SOLE):
-            placement = self.configuration.get_transform_frame_to_world(frame)
-            on_floor = placement.translation * np.array([1.0, 1.0, 0.0])
-            flat.append(pin.SE3(yaw_only(placement.rotation), on_floor))
-        return flat[0].actInv(flat[1])

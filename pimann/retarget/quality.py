@@ -12,9 +12,8 @@ import pinocchio as pin
 from pimann.contacts import trajectory_configurations
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
-from pimann.retarget.odometry import SOLE_CORNERS
 from pimann.retarget.targets import segment_targets
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, load_robot
+from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, load_robot
 from pimann.trajectory import Trajectory
 
 AT_LIMIT_RAD = 0.01  # a joint within this of a bound counts as "at its limit"
@@ -56,7 +55,7 @@ def frame_measures(
             soles[t, k] = placement.translation
             corners[t, k] = SOLE_CORNERS @ placement.rotation.T + placement.translation
             shanks[t, k] = data.oMi[knees[k]].translation, data.oMi[ankles[k]].translation
-    targets = segment_targets(motion, params, trajectory.contacts)
+    targets = segment_targets(motion, params)
     relative = np.swapaxes(rotations, -1, -2) @ targets
     cosine = np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
     lower, upper = robot.joint_lower, robot.joint_upper

@@ -27,17 +27,17 @@ FEET = ("LeftFoot", "RightFoot")
 
 
 def segment_targets(
-    motion: HumanMotion, params: RetargetParams, contacts: np.ndarray | None = None
+    motion: HumanMotion, params: RetargetParams, sole_headings: np.ndarray | None = None
 ) -> np.ndarray:
-    """(T, 13, 3, 3) target orientations after the pre-processing chosen in params;
-    `contacts` (T, 2) lets a planted foot keep one heading (params.hold_stance_heading)."""
+    """(T, 13, 3, 3) target orientations after the pre-processing chosen in params; with
+    `sole_headings` (T, 2) the flat feet take the planned headings (feet.py)."""
     targets = motion.orientations.copy()
     if params.flat_feet:
         for side, foot in enumerate(FEET):
             k = SEGMENTS.index(foot)
             yaw = np.arctan2(targets[:, k, 1, 0], targets[:, k, 0, 0])
-            if params.hold_stance_heading and contacts is not None:
-                yaw = hold_during_contact(yaw, contacts[:, side])
+            if sole_headings is not None:
+                yaw = sole_headings[:, side]
             targets[:, k] = rot_z(yaw)
     if params.min_leg_roll_spread > -np.pi:
         spread_legs(targets, params.min_leg_roll_spread)
@@ -52,30 +52,6 @@ def segment_targets(
         t8_tilt = np.swapaxes(yaw_only(t8), -1, -2) @ t8
         targets[:, head] = yaw_only(targets[:, head]) @ t8_tilt
     return targets
-
-
-def hold_during_contact(yaw: np.ndarray, contact: np.ndarray) -> np.ndarray:
-    """Headings held at their touchdown value through each contact run: a planted foot
-    does not turn (the person's foot rolls and twists a little while down; the robot's
-    sole would then slide at its corners). Touchdown, not the run's mean, so the target
-    does not jump when the foot lands."""
-    yaw = yaw.copy()
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], contact.astype(int), [0]])))
-    for start, stop in zip(edges[::2], edges[1::2], strict=True):
-        yaw[start:stop] = yaw[start]
-    return yaw
-
-
-def human_contacts(motion: HumanMotion, params: RetargetParams) -> np.ndarray:
-    """(T, 2) bool, left and right: the foot is low (within contact_height of the clip's
-    lowest foot height) and slow (horizontal speed below contact_speed)."""
-    feet = motion.segment_positions[:, [SEGMENTS.index(f) for f in FEET]]
-    floor = feet[..., 2].min()
-    low = feet[..., 2] < floor + params.contact_height
-    if motion.n_frames < 2:
-        return low
-    speed = np.linalg.norm(np.gradient(feet[..., :2], motion.time, axis=0), axis=-1)
-    return low & (speed < params.contact_speed)
 
 
 def leg_length_ratio(motion: HumanMotion, robot: Robot) -> float:

@@ -17,6 +17,7 @@ import numpy as np
 
 from pimann.errors import PimannError
 from pimann.params import SimulateParams
+from pimann.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.sim.footsteps import FootstepPlan
 
 GRAVITY = 9.81
@@ -144,7 +145,7 @@ def plan_dcm(
     opti = ca.Opti()
     state = opti.variable(4, n + 1)  # x, y, vx, vy
     zmp = opti.variable(2, n)
-    half = np.array([params.foot_half_length, params.foot_half_width]) - params.zmp_margin
+    half = np.array([SOLE_HALF_LENGTH, SOLE_HALF_WIDTH]) - params.zmp_margin
     if np.any(half <= 0):
         raise PimannError(None, "zmp_margin leaves no support area")
     opti.subject_to(state[:, 0] == ca.DM([com0[0], com0[1], 0.0, 0.0]))

@@ -19,7 +19,7 @@ import numpy as np
 from pimann.atomic import atomic_path
 from pimann.errors import PimannError
 from pimann.params import SimulateParams
-from pimann.robot import JOINT_NAMES
+from pimann.robot import JOINT_NAMES, SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.sim.run import SimulationResult
 from pimann.trajectory import Trajectory, write_trajectory
 
@@ -84,7 +84,7 @@ def foot_rectangle(position: np.ndarray, yaw: float, half_length: float, half_wi
 def zmp_outside_support(result: SimulationResult, params: SimulateParams) -> np.ndarray:
     """(K,) m: measured ZMP's distance outside the measured support polygon, 0 inside.
 
-    The polygon is the hull of the foot rectangles (`foot_half_length` x `foot_half_width`,
+    The polygon is the hull of the sole rectangles (pimann.robot's `SOLE_HALF_LENGTH` x `_WIDTH`,
     no margin) of the feet the floor pushes on (> CONTACT_FORCE_N), at their simulated
     positions with the plan's yaw; the ZMP is taken back to the simulation's world (the
     trace has the feet's drift removed, com_world - com_measured). The plan's contacts would
@@ -105,8 +105,8 @@ def zmp_outside_support(result: SimulationResult, params: SimulateParams) -> np.
             foot_rectangle(
                 result.soles_measured[k, side],
                 result.footsteps.foot_pose(side, t)[1],
-                params.foot_half_length,
-                params.foot_half_width,
+                SOLE_HALF_LENGTH,
+                SOLE_HALF_WIDTH,
             )
             for side in (0, 1)
             if recent[k, side]

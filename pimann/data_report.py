@@ -1,0 +1,605 @@
+"""What the models learn from: composition and foot quality of the retargeted collection.
+
+The study is about still support feet, so every foot metric the evaluate stage applies to
+generated trajectories is applied here, with the same functions and contact rule, to the data
+(a trajectory collection, pimann.trajectory), per source (the clips' `dataset` attribute,
+"all" when absent) and in total:
+
+- Motion classes, per frame, from the base's planar velocity in the heading (yaw) frame and
+  its yaw rate, both averaged over a centred window of `WINDOW_S` (the mean of the finite
+  difference velocity over a window is the displacement across it divided by its duration;
+  the window shrinks at the clip's ends). In this order: standing (speed < `STANDING_SPEED`
+  and |yaw rate| < `STANDING_YAW_RATE`), turning in place (speed < `STANDING_SPEED`, turning
+  faster), turning (walking with |yaw rate| > `TURN_YAW_RATE`), then by the angle of the
+  velocity from the heading: forward within `FORWARD_DEG`, backward beyond `BACKWARD_DEG`, side
+  steps (left and right) within `SIDE_DEG`, diagonal otherwise. Starts and stops: changes
+  between standing and moving (any other class) whose both states last `MIN_STATE_S` or more,
+  so that jitter around the thresholds is not counted. Minutes are given for the original
+  clips and with their mirrors; the authors' composition (SPEC 8.1) is pre-mirror and
+  label-based, so the `content` labels' minutes are given beside ours where clips have them.
+- Support-foot sliding (pimann.metrics: RMS over the 3 linear / 3 angular components of the
+  sole velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
+  right sums averaged) with the evaluate stage's contact rule (the Schmitt trigger of
+  pimann.contacts on the lowest sole corner, `evaluate.contact_*`) and with the file's own
+  flags. A sum grows with the frames, so it is scaled as the paper's 10 s test: the mean per
+  frame times `PAPER_FRAMES` (500 frames, 10 s at 50 Hz). Per motion class it is restricted to
+  the frames of that class (frames whose 1 s window is, e.g., forward walking), where the class
+  has at least `MIN_CLASS_FRAMES`.
+- Double support: the fraction of walking frames (every moving class but turning in place)
+  with both feet in contact, for either contact rule.
+- Glides: the 95th percentile of the horizontal speed of the sole corners (`SOLE_CORNERS`)
+  that are within `GLIDE_HEIGHT` of the floor (z = 0), LOCAL_WORLD_ALIGNED corner velocities
+  v + omega x (R c); a clean foot is still once down (target <= `GLIDE_TARGET`).
+- The data's own L_B (pimann.physics_loss), computed exactly as training computes it on a
+  sample (pimann.train.TrainingLoss on the output y_i of pimann.features.clip_features), on
+  the ground-truth outputs of every sample of the collection (training and test clips alike,
+  built here from the collection, not from the features file), with `lower_sole` and with
+  `data_contacts` (the settled flags of pimann.features.settled_contacts).
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+import numpy as np
+import pandas as pd
+import pinocchio as pin
+from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from scipy.spatial.transform import Rotation
+
+from pimann.atomic import atomic_path, write_text_atomic
+from pimann.contacts import (
+    contacts_from_heights,
+    foot_kinematics,
+    frame_period,
+    trajectory_configurations,
+)
+from pimann.errors import PimannError
+from pimann.evaluate import PAPER_BASELINE_RMSE
+from pimann.features import clip_features, settled_contacts, window_layout
+from pimann.figures import BASELINE_COLOUR, style
+from pimann.metrics import FOOT_VELOCITY_FRAMES, manifold_velocities
+from pimann.parallel import pool_map
+from pimann.params import FiguresParams, Params, as_dict
+from pimann.robot import SOLE_CORNERS, load_robot
+from pimann.rotations import yaw_of
+from pimann.trajectory import Trajectory, iter_collection
+
+# ----------------------------------------------------------------------------- thresholds
+WINDOW_S = 1.0  # s, centred window of the base velocity and yaw rate
+STANDING_SPEED = 0.1  # m/s, planar base speed below which the robot is not walking
+STANDING_YAW_RATE = 0.2  # rad/s, ... and below which it is standing, not turning in place
+TURN_YAW_RATE = 0.25  # rad/s, walking faster than this is turning
+FORWARD_DEG = 30.0  # velocity within +-30 deg of the heading
+SIDE_DEG = (60.0, 120.0)  # side steps, left or right
+BACKWARD_DEG = 150.0  # beyond +-150 deg
+MIN_STATE_S = 0.5  # s, standing and moving must each last this long for a start or stop
+MIN_CLASS_FRAMES = 500  # per-class foot metrics only over at least 10 s at 50 Hz
+PAPER_FRAMES = 500  # the paper's test: 500 frames (10 s at 50 Hz)
+GLIDE_HEIGHT = 0.005  # m, a sole corner this close to the floor is down
+GLIDE_TARGET = 0.1  # m/s, what the 95th percentile of a down corner's speed should not exceed
+GLIDE_PERCENTILE = 95.0
+
+CLASSES = ("forward", "backward", "side", "diagonal", "turning", "turning_in_place", "standing")
+WALKING = ("forward", "backward", "side", "diagonal", "turning")  # double support is over these
+RULES = ("evaluate_rule", "file_contacts")
+ALL = "all"  # the source of clips without a `dataset` attribute
+TOTAL = "total"
+CORNER_COLUMNS = tuple(f"glide_{f}{c}" for f in "lr" for c in range(len(SOLE_CORNERS)))
+
+# SPEC 8.1: the authors' training data, label-based minutes before mirroring
+AUTHORS_MINUTES = {"forward": 5.3, "backward": 5.4, "side": 5.7, "diagonal": 2.4, "mixed": 13.3}
+AUTHORS_SAMPLES = {"originals": 96_065, "with_mirrors": 192_130}
+CLASS_COLOURS = {
+    "forward": "tab:blue",
+    "backward": "tab:orange",
+    "side": "tab:green",
+    "diagonal": "tab:purple",
+    "turning": "tab:red",
+    "turning_in_place": "tab:brown",
+    "standing": "0.7",
+    "mixed": "tab:cyan",
+}
+
+
+# ----------------------------------------------------------------------------- motion classes
+
+
+def _window_bounds(n: int, half: int) -> tuple[np.ndarray, np.ndarray]:
+    frames = np.arange(n)
+    return np.maximum(frames - half, 0), np.minimum(frames + half, n - 1)
+
+
+def base_motion(trajectory: Trajectory, window_s: float = WINDOW_S):
+    """(T, 2) planar base velocity in the heading frame and (T,) yaw rate, window means."""
+    time = np.asarray(trajectory.time, dtype=float)
+    if len(time) < 2:
+        raise PimannError(trajectory.source, f"needs at least 2 frames, has {len(time)}")
+    half = max(1, round(window_s / 2 / frame_period(trajectory)))
+    lo, hi = _window_bounds(len(time), half)
+    span = time[hi] - time[lo]
+    rotations = Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()
+    yaw = np.unwrap(yaw_of(rotations))
+    sums = np.concatenate([[0.0], np.cumsum(yaw)])
+    heading = (sums[hi + 1] - sums[lo]) / (hi + 1 - lo)
+    position = np.asarray(trajectory.base_position, dtype=float)
+    world = (position[hi, :2] - position[lo, :2]) / span[:, None]
+    cos, sin = np.cos(heading), np.sin(heading)
+    velocity = np.stack(
+        [cos * world[:, 0] + sin * world[:, 1], -sin * world[:, 0] + cos * world[:, 1]], -1
+    )
+    return velocity, (yaw[hi] - yaw[lo]) / span
+
+
+def classify(velocity: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:
+    """(T,) index into `CLASSES` of each frame, from `base_motion`'s outputs."""
+    speed = np.linalg.norm(velocity, axis=-1)
+    angle = np.degrees(np.abs(np.arctan2(velocity[:, 1], velocity[:, 0])))
+    still = speed < STANDING_SPEED
+    code = {name: k for k, name in enumerate(CLASSES)}
+    return np.select(
+        [
+            still & (np.abs(yaw_rate) < STANDING_YAW_RATE),
+            still,
+            np.abs(yaw_rate) > TURN_YAW_RATE,
+            angle <= FORWARD_DEG,
+            angle >= BACKWARD_DEG,
+            (angle >= SIDE_DEG[0]) & (angle <= SIDE_DEG[1]),
+        ],
+        [
+            code["standing"],
+            code["turning_in_place"],
+            code["turning"],
+            code["forward"],
+            code["backward"],
+            code["side"],
+        ],
+        code["diagonal"],
+    )
+
+
+def motion_classes(trajectory: Trajectory) -> np.ndarray:
+    """(T,) index into `CLASSES` of each frame of a trajectory."""
+    return classify(*base_motion(trajectory))
+
+
+def transitions(moving: np.ndarray, min_frames: int) -> tuple[np.ndarray, np.ndarray]:
+    """Frames where a start (standing -> moving) and a stop (moving -> standing) happen.
+
+    Runs of either state shorter than `min_frames` are jitter: they are dropped, and a change
+    counts between the remaining runs of different states (at the first frame of the later).
+    """
+    moving = np.asarray(moving, dtype=bool)
+    if len(moving) == 0:
+        return np.empty(0, int), np.empty(0, int)
+    starts = np.flatnonzero(np.diff(moving.astype(int))) + 1
+    starts = np.concatenate([[0], starts])
+    lengths = np.diff(np.concatenate([starts, [len(moving)]]))
+    keep = lengths >= min_frames
+    starts, states = starts[keep], moving[starts[keep]].astype(int)
+    change = np.diff(states)
+    return starts[1:][change == 1], starts[1:][change == -1]
+
+
+# ----------------------------------------------------------------------------- per frame
+
+
+@functools.cache
+def _training_loss(layout):
+    """The training stage's loss module, with identity statistics (y in physical units)."""
+    import torch
+
+    from pimann.features import Normalisation
+    from pimann.train import TrainingLoss
+
+    stats = Normalisation(
+        np.zeros(layout.input_dim),
+        np.ones(layout.input_dim),
+        np.zeros(layout.output_dim),
+        np.ones(layout.output_dim),
+    )
+    return TrainingLoss(layout, stats, "ground_truth", torch.device("cpu"))
+
+
+def data_pi_loss(trajectory: Trajectory, params: Params) -> dict[str, np.ndarray]:
+    """The data's own L_B per training sample of a clip: `steps` (N,) frames, `lower_sole`
+    (N,), and `data_contacts` (N,) where the clip has contact flags."""
+    import torch
+
+    layout = window_layout(params.features, float(trajectory.rate_hz), "full")
+    _, y, steps = clip_features(trajectory, layout)
+    out = {"steps": steps, "lower_sole": np.empty(0), "data_contacts": np.empty(0)}
+    if len(steps) == 0:
+        return out
+    loss = _training_loss(layout)
+    with torch.no_grad():
+        terms = loss.pi_terms(torch.as_tensor(y, dtype=torch.float32))
+        out["lower_sole"] = loss.physics(**terms).double().numpy()
+        if trajectory.contacts is not None:
+            margin = round(params.features.contact_margin_s * layout.rate_hz)
+            support = settled_contacts(trajectory.contacts, margin)[steps]
+            out["data_contacts"] = (
+                loss.physics(**terms, support=torch.as_tensor(support)).double().numpy()
+            )
+    return out
+
+
+def _corner_speeds(positions, rotations, velocities) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 2, C) heights and horizontal speeds of the sole corners (LOCAL_WORLD_ALIGNED v)."""
+    offsets = np.swapaxes(rotations @ SOLE_CORNERS.T, -1, -2)  # (T, 2, C, 3) world R c
+    heights = positions[..., None, 2] + offsets[..., 2]
+    linear = velocities[..., None, :3] + np.cross(velocities[..., None, 3:], offsets)
+    return heights, np.linalg.norm(linear[..., :2], axis=-1)
+
+
+def _sliding(rms: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+    """(T,) the frame's share of the total RMSE: contact-masked RMS, averaged over the feet."""
+    return np.where(contacts, rms, 0.0).mean(axis=1)
+
+
+def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFrame:
+    """One row per frame of a clip: class, sliding, double support, glides, L_B, events."""
+    robot = load_robot("retarget")
+    time = np.asarray(trajectory.time, dtype=float)
+    dt = frame_period(trajectory)
+    configurations = trajectory_configurations(robot, trajectory)
+    velocities = manifold_velocities(robot.model, configurations, time)
+    if trajectory.joint_velocities is not None:  # as pimann.metrics does
+        velocities[:, robot.v_index] = trajectory.joint_velocities
+    feet = foot_kinematics(robot, configurations, velocities, pin.LOCAL_WORLD_ALIGNED)
+    reference = params.evaluate.foot_velocity_frame
+    if FOOT_VELOCITY_FRAMES[reference] != pin.LOCAL_WORLD_ALIGNED:
+        sliding_velocities = foot_kinematics(
+            robot, configurations, velocities, FOOT_VELOCITY_FRAMES[reference]
+        ).velocities
+    else:
+        sliding_velocities = feet.velocities
+    rms = {
+        "linear": np.sqrt(np.mean(sliding_velocities[..., :3] ** 2, axis=-1)),
+        "angular": np.sqrt(np.mean(sliding_velocities[..., 3:] ** 2, axis=-1)),
+    }
+    contacts = {"evaluate_rule": contacts_from_heights(feet.heights, dt, params.evaluate)}
+    if trajectory.contacts is not None:
+        contacts["file_contacts"] = np.asarray(trajectory.contacts, dtype=bool)
+
+    classes = motion_classes(trajectory)
+    n = len(time)
+    columns: dict[str, Any] = {
+        "clip": name,
+        "dataset": str(trajectory.attrs.get("dataset", ALL)),
+        "mirrored": bool(trajectory.attrs.get("mirrored", False)),
+        "content": str(trajectory.attrs.get("content", "")),
+        "seconds": dt,
+        "class": np.asarray(CLASSES)[classes],
+    }
+    starts, stops = transitions(classes != CLASSES.index("standing"), round(MIN_STATE_S / dt))
+    columns["start"] = np.isin(np.arange(n), starts)
+    columns["stop"] = np.isin(np.arange(n), stops)
+    for rule in RULES:
+        flags = contacts.get(rule)
+        for kind in ("linear", "angular"):
+            columns[f"{kind}_{rule}"] = np.nan if flags is None else _sliding(rms[kind], flags)
+        columns[f"double_{rule}"] = np.nan if flags is None else flags.all(axis=1).astype(float)
+    heights, speeds = _corner_speeds(feet.positions, feet.rotations, feet.velocities)
+    speeds = np.where(heights <= GLIDE_HEIGHT, speeds, np.nan).reshape(n, -1)
+    for k, column in enumerate(CORNER_COLUMNS):
+        columns[column] = speeds[:, k]
+    pi = data_pi_loss(trajectory, params)
+    for support in ("lower_sole", "data_contacts"):
+        values = np.full(n, np.nan)
+        if len(pi[support]):
+            values[pi["steps"]] = pi[support]
+        columns[f"l_b_{support}"] = values
+    return pd.DataFrame(columns)
+
+
+def _clip_job(job: tuple[str, Trajectory, Params]) -> pd.DataFrame:
+    return clip_frames(*job)
+
+
+def collection_frames(
+    trajectories: Iterable[tuple[str, Trajectory]], params: Params, workers: int = 1
+) -> pd.DataFrame:
+    """`clip_frames` of every clip, one table."""
+    jobs = [(name, trajectory, params) for name, trajectory in trajectories]
+    if not jobs:
+        raise PimannError(None, "the collection holds no trajectory")
+    return pd.concat(pool_map(_clip_job, jobs, workers, "data report"), ignore_index=True)
+
+
+# ----------------------------------------------------------------------------- summaries
+
+
+def _number(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
+
+
+def _minutes(frames: pd.DataFrame, by: str, names: Iterable[str]) -> dict[str, float]:
+    seconds = frames.groupby(by)["seconds"].sum()
+    return {name: float(seconds.get(name, 0.0)) / 60.0 for name in names}
+
+
+def sliding(frames: pd.DataFrame, rule: str) -> dict[str, float | None]:
+    """The total RMSE scaled to the paper's 500 frames, over the given frames."""
+    return {
+        kind: _number(PAPER_FRAMES * frames[f"{kind}_{rule}"].mean()) if len(frames) else None
+        for kind in ("linear", "angular")
+    }
+
+
+def glides(frames: pd.DataFrame) -> dict[str, float | int | None]:
+    speeds = frames[list(CORNER_COLUMNS)].to_numpy().ravel()
+    speeds = speeds[np.isfinite(speeds)]
+    if len(speeds) == 0:
+        return {"p95_m_s": None, "fraction_above_target": None, "samples": 0}
+    return {
+        "p95_m_s": float(np.percentile(speeds, GLIDE_PERCENTILE)),
+        "fraction_above_target": float(np.mean(speeds > GLIDE_TARGET)),
+        "samples": len(speeds),
+    }
+
+
+def summarise(frames: pd.DataFrame) -> dict[str, Any]:
+    """Composition of the original clips, and every foot metric over all clips (mirrors too)."""
+    originals = frames[~frames["mirrored"]]
+    walking = frames[frames["class"].isin(WALKING)]
+    labels = originals["content"].replace("", "unlabelled")
+    summary: dict[str, Any] = {
+        "clips": int(originals["clip"].nunique()),
+        "clips_with_mirrors": int(frames["clip"].nunique()),
+        "frames": len(originals),
+        "frames_with_mirrors": len(frames),
+        "minutes": _minutes(originals, "class", CLASSES),
+        "minutes_with_mirrors": _minutes(frames, "class", CLASSES),
+        "label_minutes": _minutes(originals.assign(content=labels), "content", sorted(set(labels))),
+        "starts": int(originals["start"].sum()),
+        "stops": int(originals["stop"].sum()),
+        "sliding": {},
+        "double_support": {},
+        "glides": glides(frames),
+        "l_b": {},
+    }
+    summary["minutes"]["total"] = float(originals["seconds"].sum()) / 60.0
+    summary["minutes_with_mirrors"]["total"] = float(frames["seconds"].sum()) / 60.0
+    by_class = dict(tuple(frames.groupby("class")))
+    for rule in RULES:
+        if frames[f"linear_{rule}"].isna().any():
+            summary["sliding"][rule] = None
+            summary["double_support"][rule] = None
+            continue
+        summary["sliding"][rule] = sliding(frames, rule)
+        summary["sliding"][rule]["per_class"] = {
+            name: sliding(part, rule)
+            for name, part in sorted(by_class.items())
+            if len(part) >= MIN_CLASS_FRAMES
+        }
+        double = walking[f"double_{rule}"]
+        summary["double_support"][rule] = _number(double.mean()) if len(double) else None
+    for support in ("lower_sole", "data_contacts"):
+        values = frames[f"l_b_{support}"].dropna()
+        forward = frames.loc[frames["class"] == "forward", f"l_b_{support}"].dropna()
+        summary["l_b"][support] = {
+            "mean": _number(values.mean()) if len(values) else None,
+            "forward": _number(forward.mean()) if len(forward) >= MIN_CLASS_FRAMES else None,
+            "samples": len(values),
+        }
+    return summary
+
+
+def thresholds() -> dict[str, Any]:
+    return {
+        "window_s": WINDOW_S,
+        "standing_speed_m_s": STANDING_SPEED,
+        "standing_yaw_rate_rad_s": STANDING_YAW_RATE,
+        "turn_yaw_rate_rad_s": TURN_YAW_RATE,
+        "forward_deg": FORWARD_DEG,
+        "side_deg": list(SIDE_DEG),
+        "backward_deg": BACKWARD_DEG,
+        "min_state_s": MIN_STATE_S,
+        "min_class_frames": MIN_CLASS_FRAMES,
+        "paper_frames": PAPER_FRAMES,
+        "glide_height_m": GLIDE_HEIGHT,
+        "glide_target_m_s": GLIDE_TARGET,
+        "glide_percentile": GLIDE_PERCENTILE,
+    }
+
+
+def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -> dict[str, Any]:
+    """The report: per source, in total, the authors' figures and where it all came from."""
+    sources = {name: summarise(part) for name, part in sorted(frames.groupby("dataset"))}
+    sources[TOTAL] = summarise(frames)
+    return {
+        "collection": str(collection),
+        "profile": params.profile,
+        "params": {
+            "data": as_dict(params.data),
+            "evaluate": as_dict(params.evaluate),
+            "features": {
+                "window": params.features.window,
+                "contact_margin_s": params.features.contact_margin_s,
+            },
+            "train": {"pi_support": params.train.pi_support},
+        },  # fmt: skip
+        "thresholds": thresholds(),
+        "authors": {
+            "minutes": AUTHORS_MINUTES,
+            "samples": AUTHORS_SAMPLES,
+            "baseline_model_sliding": PAPER_BASELINE_RMSE,
+        },
+        "sources": sources,
+    }
+
+
+def data_report(collection: str | Path, params: Params, workers: int = 1) -> dict[str, Any]:
+    """The report of a trajectory collection file."""
+    frames = collection_frames(iter_collection(collection), params, workers)
+    return build_report(frames, params, collection)
+
+
+# ----------------------------------------------------------------------------- outputs
+
+
+def _cell(value: float | None, digits: int = 1) -> str:
+    return "-" if value is None or not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def report_table(report: dict[str, Any]) -> str:
+    """The report as Markdown tables: composition, then foot metrics."""
+    sources = report["sources"]
+    short = ["fwd", "back", "side", "diag", "turn", "turn@0", "stand"]
+    lines = [
+        f"# Data report: {report['collection']} (profile {report['profile']})",
+        "",
+        "Minutes per motion class of the original clips (per-frame classes from the base "
+        f"velocity over {WINDOW_S:g} s), clip and frame counts with mirrors, start/stop "
+        "transitions.",
+        "",
+        "| source | " + " | ".join(short) + " | total | clips (+mirrors) | frames (+mirrors) "
+        "| starts | stops |",
+        "|---" * (len(short) + 6) + "|",
+    ]
+    for name, s in sources.items():
+        minutes = [_cell(s["minutes"][c]) for c in CLASSES]
+        lines.append(
+            f"| {name} | " + " | ".join(minutes) + f" | {_cell(s['minutes']['total'])} "
+            f"| {s['clips']} ({s['clips_with_mirrors']}) | {s['frames']} "
+            f"({s['frames_with_mirrors']}) | {s['starts']} | {s['stops']} |"
+        )
+    authors = report["authors"]
+    a = authors["minutes"]
+    lines.append(
+        f"| authors (labels) | {a['forward']} | {a['backward']} | {a['side']} | {a['diagonal']} "
+        f"| mixed {a['mixed']} | | | {sum(a.values()):.1f} | | {authors['samples']['originals']} "
+        f"({authors['samples']['with_mirrors']}) | | |"
+    )
+    lines += ["", "Minutes per `content` label (original clips).", ""]
+    labels = sorted({k for s in sources.values() for k in s["label_minutes"]})
+    lines += ["| source | " + " | ".join(labels) + " |", "|---" * (len(labels) + 1) + "|"]
+    for name, s in sources.items():
+        cells = [_cell(s["label_minutes"].get(k, 0.0)) for k in labels]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    baseline = authors["baseline_model_sliding"]
+    lines += [
+        "",
+        f"Foot metrics over all clips with mirrors. Sliding: total RMSE per {PAPER_FRAMES} "
+        "frames (linear m/s, angular rad/s), with the evaluate stage's contact rule (rule) and "
+        "the file's flags (file); fwd: forward-walking frames only. DS: double-support "
+        f"fraction of walking frames. Glide: p{GLIDE_PERCENTILE:g} horizontal speed of sole "
+        f"corners within {GLIDE_HEIGHT * 1000:g} mm of the floor (target <= {GLIDE_TARGET:g} "
+        "m/s), and the share above the target. L_B: the data's own physics loss.",
+        "",
+        "| source | slide lin rule | ang rule | lin file | ang file | fwd lin rule | "
+        "fwd ang rule | fwd lin file | fwd ang file | DS rule | DS file | glide p95 | "
+        "glide > target | L_B lower_sole | L_B data_contacts |",
+        "|---" * 15 + "|",
+    ]
+    for name, s in sources.items():
+        cells = []
+        for rule in RULES:
+            values = s["sliding"][rule] or {}
+            cells += [_cell(values.get("linear")), _cell(values.get("angular"))]
+        for rule in RULES:
+            forward = ((s["sliding"][rule] or {}).get("per_class") or {}).get("forward") or {}
+            cells += [_cell(forward.get("linear")), _cell(forward.get("angular"))]
+        cells += [_cell(s["double_support"][r], 3) for r in ("evaluate_rule", "file_contacts")]
+        cells += [
+            _cell(s["glides"]["p95_m_s"], 3),
+            _cell(s["glides"]["fraction_above_target"], 3),
+            _cell(s["l_b"]["lower_sole"]["mean"], 4),
+            _cell(s["l_b"]["data_contacts"]["mean"], 4),
+        ]
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines.append(
+        f"| authors' baseline model | {baseline['linear']} | {baseline['angular']} |" + " |" * 13
+    )
+    lines += [
+        "",
+        f"Sliding per motion class (frames of that class only, at least {MIN_CLASS_FRAMES}), "
+        "in total; linear / angular.",
+        "",
+        "| class | contact rule | file flags |",
+        "|---|---|---|",
+    ]
+    total = sources[TOTAL]["sliding"]
+    for name in CLASSES:
+        cells = []
+        for rule in RULES:
+            values = ((total[rule] or {}).get("per_class") or {}).get(name) or {}
+            cells.append(f"{_cell(values.get('linear'))} / {_cell(values.get('angular'))}")
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def report_figure(report: dict[str, Any], figures: FiguresParams) -> Figure:
+    """Minutes per class per source (stacked, the authors' beside) and sliding per source."""
+    sources = report["sources"]
+    names = list(sources)
+    small = figures.font_pt - 2
+    fig = Figure(figsize=(figures.width_in, 4.8), layout="constrained")
+    top, bottom = fig.subplots(2, 1, height_ratios=[1.0, 1.2])
+    rows = ["authors", *names]
+    left = np.zeros(len(rows))
+    for name in (*CLASSES, "mixed"):
+        widths = np.array(
+            [report["authors"]["minutes"].get(name, 0.0)]
+            + [sources[s]["minutes"].get(name, 0.0) for s in names]
+        )
+        if not widths.any():
+            continue
+        label = name.replace("_", " ")
+        top.barh(rows, widths, left=left, color=CLASS_COLOURS[name], label=label, height=0.6)
+        left += widths
+    top.invert_yaxis()
+    top.set_xlabel("minutes (original clips, before mirroring)")
+    top.legend(ncols=4, loc="upper center", bbox_to_anchor=(0.5, -0.32), fontsize=small)
+    x = np.arange(len(names))
+    for k, (kind, colour) in enumerate((("linear", "tab:blue"), ("angular", "tab:orange"))):
+        for rule, hatch in (("evaluate_rule", None), ("file_contacts", "///")):
+            values = [(sources[s]["sliding"][rule] or {}).get(kind) for s in names]
+            offset = (2 * k + (rule == "file_contacts")) * 0.2 - 0.3
+            bottom.bar(
+                x + offset,
+                [np.nan if v is None else v for v in values],
+                width=0.2,
+                color=colour,
+                alpha=1.0 if hatch is None else 0.45,
+                hatch=hatch,
+                label=f"{kind}, {'contact rule' if hatch is None else 'file flags'}",
+            )
+        baseline = report["authors"]["baseline_model_sliding"][kind]
+        bottom.axhline(baseline, color=colour, ls="--", lw=0.8)
+    handles, labels = bottom.get_legend_handles_labels()
+    handles.append(Line2D([], [], color=BASELINE_COLOUR, ls="--", lw=0.8))
+    labels.append("authors' baseline model")
+    bottom.legend(
+        handles, labels, ncols=2, loc="upper center", bbox_to_anchor=(0.5, -0.12), fontsize=small
+    )
+    bottom.set_xticks(x, names)
+    bottom.set_ylabel(f"sliding per {PAPER_FRAMES} frames")
+    if report["profile"] != "paper":
+        fig.text(0.005, 0.005, f"profile: {report['profile']}", fontsize=5, color="0.4")
+    return fig
+
+
+def write_report(
+    report: dict[str, Any],
+    json_path: str | Path,
+    table_path: str | Path,
+    figure_path: str | Path,
+    figures: FiguresParams,
+) -> None:
+    """The report as JSON, the Markdown table and the PNG figure, each written atomically."""
+    write_text_atomic(json_path, json.dumps(report, indent=2) + "\n")
+    write_text_atomic(table_path, report_table(report))
+    with matplotlib.rc_context(style(figures)):
+        fig = report_figure(report, figures)
+        metadata = {"Title": "data_report", "Description": f"pimann profile={report['profile']}"}
+        with atomic_path(figure_path) as tmp:
+            fig.savefig(tmp, format="png", metadata=metadata)

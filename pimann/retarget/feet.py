@@ -1,0 +1,252 @@
+"""Where the robot's feet go: the person's foot contacts and the robot's sole targets.
+
+A robot copying a person's leg angles slides its feet: its legs are shorter, its soles are
+rigid plates, and a flat-foot target glides along the floor at every touchdown (SPEC 3.2).
+So the feet are planned first and the IK follows the plan (ik.py):
+
+1. Contacts from the person's heel and toe (`HumanMotion.contact_points`): a point is down
+   while it is low and slow, with hysteresis (it must rise higher, move faster or travel
+   farther from where it came down to come up again); a foot is down while either point
+   is. Short flickers are removed, double support is kept.
+2. Each contact run is one footstep: the robot's sole lies flat on the floor at one place
+   and heading for the whole run: where the robot's own sole stands, on median, when its
+   joints copy the person's (a first IK pass with the pelvis held; its legs are shorter, so
+   the person's footprints scaled would not match its leg angles).
+3. Between two footsteps the sole first rises vertically above the evaluation's contact
+   height, travels on a minimum-jerk path at least `swing_clearance` high in mid-swing,
+   and sinks vertically onto the next footstep: no sole point moves horizontally while it
+   is at floor height (nor while a contact rule on its height would call it down).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from pimann.mocap.human_motion import HumanMotion
+from pimann.params import RetargetParams
+
+FEET = ("LeftFoot", "RightFoot")
+SWING_VERTICAL = 0.2  # share of a swing at each end with no horizontal motion
+DEFAULT_SWING_S = 0.4  # s, a swing's length when a clip has no whole swing to measure
+
+
+def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) index pairs of the True runs of a 1-D bool array."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(int), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def hysteresis(
+    on: np.ndarray,
+    off: np.ndarray,
+    start: bool,
+    positions: np.ndarray | None = None,
+    max_travel: float = np.inf,
+) -> np.ndarray:
+    """(T,) bool: switches on where `on` holds, off where `off` holds, else keeps its state.
+    With `positions` (T, 2), a point that is on also switches off once it has travelled
+    more than `max_travel` from where it came down: a planted point does not wander (a
+    shuffling foot that stays low and slow still steps)."""
+    state, out = start, np.empty(len(on), bool)
+    anchor = None if positions is None else positions[0]
+    for t in range(len(on)):
+        was = state
+        state = (state and not off[t]) or bool(on[t])
+        if positions is not None:
+            if state and was and np.linalg.norm(positions[t] - anchor) > max_travel:
+                state = False
+            if state and not was:
+                anchor = positions[t]
+        out[t] = state
+    return out
+
+
+def debounce(flags: np.ndarray, min_on: int, min_off: int) -> np.ndarray:
+    """Gaps shorter than `min_off` frames filled, then runs shorter than `min_on` dropped;
+    runs touching the clip's ends are kept (they may be longer outside the clip)."""
+    flags = flags.copy()
+    for start, stop in _runs(~flags):
+        if stop - start < min_off and start > 0 and stop < len(flags):
+            flags[start:stop] = True
+    for start, stop in _runs(flags):
+        if stop - start < min_on and start > 0 and stop < len(flags):
+            flags[start:stop] = False
+    return flags
+
+
+def human_contacts(motion: HumanMotion, params: RetargetParams) -> np.ndarray:
+    """(T, 2) bool, left and right: the person's foot is on the floor (heel or toe down)."""
+    points = motion.contact_points()  # (T, 2, P, 3)
+    # each kind of point (heel, toe) has its own floor height: its low percentile in the take
+    floor = np.percentile(points[..., 2], 2.0, axis=(0, 1))
+    height = points[..., 2] - floor
+    if motion.n_frames < 2:
+        return (height < params.contact_height).any(axis=-1)
+    speed = np.linalg.norm(np.gradient(points[..., :2], motion.time, axis=0), axis=-1)
+    on = (height < params.contact_height) & (speed < params.contact_speed)
+    off = (height > params.release_height) | (speed > params.release_speed)
+    rate = motion.rate_hz
+    min_on = max(1, round(params.min_contact_s * rate))
+    min_off = max(1, round(params.min_swing_s * rate))
+    contacts = np.empty((motion.n_frames, 2), bool)
+    for side in range(2):
+        down = np.stack(
+            [hysteresis(on[:, side, p], off[:, side, p], bool(on[0, side, p]),
+                        points[:, side, p, :2], params.release_travel)
+             for p in range(points.shape[2])],
+            axis=-1,
+        ).any(axis=-1)  # fmt: skip
+        contacts[:, side] = debounce(down, min_on, min_off)
+    return contacts
+
+
+def min_jerk(s: np.ndarray) -> np.ndarray:
+    """Minimum-jerk progress 0 -> 1 with zero velocity and acceleration at both ends."""
+    s = np.clip(s, 0.0, 1.0)
+    return s**3 * (10.0 - 15.0 * s + 6.0 * s**2)
+
+
+@dataclasses.dataclass
+class SolePlan:
+    """What the second IK pass asks of each sole, per frame and foot (left, right)."""
+
+    positions: np.ndarray  # (T, 2, 3) m
+    headings: np.ndarray  # (T, 2) rad, the soles lie flat
+    weights: np.ndarray  # (T, 2) IK cost of the sole pose
+
+
+def plan_soles(
+    soles: np.ndarray,
+    sole_yaw: np.ndarray,
+    contacts: np.ndarray,
+    time: np.ndarray,
+    params: RetargetParams,
+) -> SolePlan:
+    """The soles' plan from where the robot's soles go when its joints copy the person's
+    (`soles` (T, 2, 3) and `sole_yaw` (T, 2), the first IK pass): each contact run becomes
+    one footstep at the run's median place and heading, on the floor (the soles' own low
+    percentile); swings between footsteps as in `swing_path`."""
+    floor = np.percentile(soles[..., 2], 2.0)
+    free = soles - [0.0, 0.0, floor]
+    free[..., 2] = np.maximum(free[..., 2], 0.0)
+    yaw = np.unwrap(sole_yaw, axis=0)
+    plan = SolePlan(free.copy(), yaw.copy(), np.full(yaw.shape, params.stance_weight))
+    for side in range(2):
+        steps = []
+        for start, stop in _runs(contacts[:, side]):
+            place = np.median(free[start:stop, side, :2], axis=0)
+            heading = float(np.median(yaw[start:stop, side]))
+            steps.append((start, stop, place, heading))
+            plan.positions[start:stop, side] = [*place, 0.0]
+            plan.headings[start:stop, side] = heading
+        for before, after in zip(steps, steps[1:], strict=False):
+            swing = slice(before[1], after[0])
+            s = (time[swing] - time[before[1] - 1]) / (time[after[0]] - time[before[1] - 1])
+            # the free sole's path from its last stance frame to its first one
+            around = slice(before[1] - 1, after[0] + 1)
+            path, heading, weight = swing_path(
+                s, before[2:], after[2:], free[around, side], yaw[around, side], params
+            )
+            plan.positions[swing, side], plan.headings[swing, side] = path, heading
+            plan.weights[swing, side] = weight
+        _open_ends(plan, side, steps, free[:, side], yaw[:, side], time, params)
+    return plan
+
+
+def swing_path(
+    s: np.ndarray,
+    start: tuple[np.ndarray, float],
+    end: tuple[np.ndarray, float],
+    free: np.ndarray,
+    free_yaw: np.ndarray,
+    params: RetargetParams,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sole positions (n, 3), headings (n,) and IK weights (n,) of one swing at swing shares
+    s in (0, 1) from footstep `start` (place, heading) to `end`. Over the first and last
+    SWING_VERTICAL of the swing the sole only rises to (sinks from) `lift_height`, above the
+    contact threshold of the evaluation. In between it travels a minimum-jerk path between
+    the footsteps plus the free sole's departure from that path at the same time (`free`
+    (n+2, 3), `free_yaw` (n+2,), from its last stance frame to its next first one), faded
+    in and out, at least `swing_clearance` high at mid-swing or as high as the free sole
+    goes: close to what the copied leg does, so the leg keeps its angles."""
+    edge = np.minimum(s, 1.0 - s)  # share of the swing to the nearer footstep
+    sigma = np.clip((s - SWING_VERTICAL) / (1.0 - 2.0 * SWING_VERTICAL), 0.0, 1.0)
+    progress = min_jerk(sigma)
+    # the free sole at the same point of its own swing, and its departure from the straight
+    # (minimum-jerk) path between its ends
+    own = np.linspace(0.0, 1.0, len(free))
+    free_at = np.column_stack([np.interp(s, own, free[:, k]) for k in range(3)])
+    chord = free[0] + progress[:, None] * (free[-1] - free[0])
+    departure = (free_at - chord) * np.sin(np.pi * sigma)[:, None] ** 2
+    place = start[0] + progress[:, None] * (end[0] - start[0]) + departure[:, :2]
+    yaw_departure = np.interp(s, own, free_yaw) - (
+        free_yaw[0] + progress * (free_yaw[-1] - free_yaw[0])
+    )
+    heading = start[1] + progress * (end[1] - start[1]) + yaw_departure * np.sin(np.pi * sigma) ** 2
+    up = params.lift_height * min_jerk(edge / SWING_VERTICAL)
+    high = np.maximum(params.swing_clearance * np.sin(np.pi * s), free_at[:, 2])
+    height = up + np.maximum(high - params.lift_height, 0.0) * min_jerk(
+        (edge - SWING_VERTICAL) / SWING_VERTICAL
+    )
+    weight = np.where(edge < SWING_VERTICAL, params.stance_weight, params.swing_weight)
+    return np.column_stack([place, height]), heading, weight
+
+
+def _open_ends(
+    plan: SolePlan,
+    side: int,
+    steps: list[tuple[int, int, np.ndarray, float]],
+    free: np.ndarray,
+    free_yaw: np.ndarray,
+    time: np.ndarray,
+    params: RetargetParams,
+) -> None:
+    """In place: a swing cut by the clip's start or end follows the free leg's sole, shifted
+    to meet the footstep it touches, and leaves (reaches) that footstep vertically as a
+    whole swing would; a foot never down follows the free sole."""
+    if not steps:
+        plan.weights[:, side] = params.swing_weight
+        return
+    swings = [b[0] - a[1] for a, b in zip(steps, steps[1:], strict=False)]
+    vertical = SWING_VERTICAL * (np.median(swings) / (1.0 / np.median(np.diff(time))) if swings
+                                 else DEFAULT_SWING_S)  # fmt: skip
+    first, last = steps[0], steps[-1]
+    if first[0] > 0:
+        head = slice(0, first[0] + 1)
+        _open_swing(plan, side, head, first[0], first[2:], free, free_yaw, time, vertical, params)
+    if last[1] < len(free):
+        tail = slice(last[1] - 1, None)
+        _open_swing(plan, side, tail, last[1] - 1, last[2:], free, free_yaw, time, vertical,
+                    params)  # fmt: skip
+
+
+def _open_swing(
+    plan: SolePlan,
+    side: int,
+    frames: slice,
+    anchor: int,
+    footstep: tuple[np.ndarray, float],
+    free: np.ndarray,
+    free_yaw: np.ndarray,
+    time: np.ndarray,
+    vertical: float,
+    params: RetargetParams,
+) -> None:
+    """The frames of one open swing, `anchor` being its frame on the footstep."""
+    away = np.abs(time[frames] - time[anchor])  # s from the footstep
+    up = params.lift_height * min_jerk(away / vertical)
+    ramp = min_jerk((away - vertical) / vertical)
+    shift = free[frames] - free[anchor]
+    plan.positions[frames, side, :2] = footstep[0] + ramp[:, None] * shift[:, :2]
+    plan.positions[frames, side, 2] = up + ramp * np.maximum(
+        free[frames, 2] - params.lift_height, 0
+    )
+    plan.headings[frames, side] = footstep[1] + ramp * (free_yaw[frames] - free_yaw[anchor])
+    plan.weights[frames, side] = np.where(
+        away < vertical, params.stance_weight, params.swing_weight
+    )
+    plan.positions[anchor, side] = [*footstep[0], 0.0]
+    plan.headings[anchor, side] = footstep[1]
+    plan.weights[anchor, side] = params.stance_weight

@@ -1,0 +1,41 @@
+"""DVC stage `data_report`: the retargeted collection -> results/data_report.json, .md, .png
+(pimann.data_report: composition per source and motion class, and the evaluate stage's foot
+metrics applied to the data itself)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from pimann.data_report import data_report, report_table, write_report
+from pimann.parallel import cpu_workers
+from pimann.params import load_params
+from pimann.paths import REPO_ROOT
+from pimann.stage import stage_entry
+
+log = logging.getLogger("data_report")
+
+
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--collection", type=Path, default=None, help="default: features.input")
+    parser.add_argument("--out", type=Path, default=Path("results/data_report"))
+    parser.add_argument("--workers", type=int, default=2)
+    args = parser.parse_args(argv)
+    params = load_params()
+    collection = REPO_ROOT / (args.collection or Path(params.features.input))
+    started = time.perf_counter()
+    report = data_report(collection, params, cpu_workers(args.workers))
+    out = REPO_ROOT / args.out
+    paths = [out.with_suffix(suffix) for suffix in (".json", ".md", ".png")]
+    write_report(report, *paths, params.figures)
+    log.info("profile %s: reported in %.0f s", params.profile, time.perf_counter() - started)
+    print(report_table(report))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
