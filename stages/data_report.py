@@ -30,6 +30,8 @@ def main(argv: list[str] | None = None) -> None:
     collection = REPO_ROOT / (args.collection or Path(params.features.input))
     started = time.perf_counter()
     report = data_report(collection, params, cpu_workers(args.workers))
+    if collection.is_relative_to(REPO_ROOT):  # recorded as the repository's own path
+        report["collection"] = str(collection.relative_to(REPO_ROOT))
     out = REPO_ROOT / args.out
     paths = [out.with_suffix(suffix) for suffix in (".json", ".md", ".png")]
     write_report(report, *paths, params.figures)
