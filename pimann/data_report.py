@@ -376,7 +376,7 @@ def summarise(frames: pd.DataFrame) -> dict[str, Any]:
             continue
         summary["sliding"][rule] = sliding(frames, rule)
         summary["sliding"][rule]["per_class"] = {
-            name: sliding(part, rule)
+            name: {**sliding(part, rule), "double_support": _number(part[f"double_{rule}"].mean())}
             for name, part in sorted(by_class.items())
             if len(part) >= MIN_CLASS_FRAMES
         }
@@ -522,10 +522,10 @@ def report_table(report: dict[str, Any]) -> str:
     lines += [
         "",
         f"Sliding per motion class (frames of that class only, at least {MIN_CLASS_FRAMES}), "
-        "in total; linear / angular.",
+        "in total; linear / angular; and the double-support fraction of those frames.",
         "",
-        "| class | contact rule | file flags |",
-        "|---|---|---|",
+        "| class | contact rule | file flags | DS rule | DS file |",
+        "|---|---|---|---|---|",
     ]
     total = sources[TOTAL]["sliding"]
     for name in CLASSES:
@@ -533,6 +533,9 @@ def report_table(report: dict[str, Any]) -> str:
         for rule in RULES:
             values = ((total[rule] or {}).get("per_class") or {}).get(name) or {}
             cells.append(f"{_cell(values.get('linear'))} / {_cell(values.get('angular'))}")
+        for rule in RULES:
+            values = ((total[rule] or {}).get("per_class") or {}).get(name) or {}
+            cells.append(_cell(values.get("double_support"), 3))
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -134,6 +134,8 @@ def test_sliding_of_a_foot_sliding_at_a_known_speed(params):
     assert rule["angular"] == pytest.approx(0.0, abs=1e-6)
     assert file["linear"] == pytest.approx(500 * u / math.sqrt(3) * 0.75, rel=1e-6)
     assert rule["per_class"]["forward"]["linear"] == pytest.approx(rule["linear"])
+    # the file's right foot is down every other 25 frames: half the frames have both down
+    assert file["per_class"]["forward"]["double_support"] == pytest.approx(0.5, abs=0.02)
     # the glide percentile sees the same sliding feet
     assert summary["glides"]["p95_m_s"] == pytest.approx(u, rel=1e-6)
     assert summary["glides"]["fraction_above_target"] == 1.0
