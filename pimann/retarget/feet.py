@@ -27,7 +27,6 @@ import numpy as np
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 
-FEET = ("LeftFoot", "RightFoot")
 SWING_VERTICAL = 0.2  # share of a swing at each end with no horizontal motion
 DEFAULT_SWING_S = 0.4  # s, a swing's length when a clip has no whole swing to measure
 
@@ -209,9 +208,10 @@ def _open_ends(
     if not steps:
         plan.weights[:, side] = params.swing_weight
         return
+    # the clip's median swing in seconds (frames times the frame period)
     swings = [b[0] - a[1] for a, b in zip(steps, steps[1:], strict=False)]
-    vertical = SWING_VERTICAL * (np.median(swings) / (1.0 / np.median(np.diff(time))) if swings
-                                 else DEFAULT_SWING_S)  # fmt: skip
+    swing_s = np.median(swings) * np.median(np.diff(time)) if swings else DEFAULT_SWING_S
+    vertical = SWING_VERTICAL * swing_s
     first, last = steps[0], steps[-1]
     if first[0] > 0:
         head = slice(0, first[0] + 1)
