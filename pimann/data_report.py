@@ -5,18 +5,12 @@ generated trajectories is applied here, with the same functions and contact rule
 (a trajectory collection, pimann.trajectory), per source (the clips' `dataset` attribute,
 "all" when absent) and in total:
 
-- Motion classes, per frame, from the base's planar velocity in the heading (yaw) frame and
-  its yaw rate, both averaged over a centred window of `WINDOW_S` (the mean of the finite
-  difference velocity over a window is the displacement across it divided by its duration;
-  the window shrinks at the clip's ends). In this order: standing (speed < `STANDING_SPEED`
-  and |yaw rate| < `STANDING_YAW_RATE`), turning in place (speed < `STANDING_SPEED`, turning
-  faster), turning (walking with |yaw rate| > `TURN_YAW_RATE`), then by the angle of the
-  velocity from the heading: forward within `FORWARD_DEG`, backward beyond `BACKWARD_DEG`, side
-  steps (left and right) within `SIDE_DEG`, diagonal otherwise. Starts and stops: changes
-  between standing and moving (any other class) whose both states last `MIN_STATE_S` or more,
-  so that jitter around the thresholds is not counted. Minutes are given for the original
-  clips and with their mirrors; the authors' composition (SPEC 8.1) is pre-mirror and
-  label-based, so the `content` labels' minutes are given beside ours where clips have them.
+- Motion classes, per frame, and starts and stops (pimann.motion_classes: the base's planar
+  velocity in the heading frame and its yaw rate over a centred `WINDOW_S` window; transitions
+  between standing and moving whose both states last `MIN_STATE_S`). Minutes are given for
+  the original clips and with their mirrors; the authors' composition (SPEC 8.1) is
+  pre-mirror and label-based, so the `content` labels' minutes are given beside ours where
+  clips have them.
 - Support-foot sliding (pimann.metrics: RMS over the 3 linear / 3 angular components of the
   sole velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
   right sums averaged) with the evaluate stage's contact rule (the Schmitt trigger of
@@ -52,9 +46,9 @@ import pandas as pd
 import pinocchio as pin
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from scipy.spatial.transform import Rotation
 
 from pimann.atomic import atomic_path, write_text_atomic
+from pimann.claims import PAPER_BASELINE_RMSE
 from pimann.contacts import (
     contacts_from_heights,
     foot_kinematics,
@@ -62,33 +56,35 @@ from pimann.contacts import (
     trajectory_configurations,
 )
 from pimann.errors import PimannError
-from pimann.evaluate import PAPER_BASELINE_RMSE
 from pimann.features import clip_features, settled_contacts, window_layout
 from pimann.figures import BASELINE_COLOUR, style
 from pimann.metrics import FOOT_VELOCITY_FRAMES, manifold_velocities
+from pimann.motion_classes import (
+    BACKWARD_DEG,
+    CLASSES,
+    FORWARD_DEG,
+    MIN_STATE_S,
+    SIDE_DEG,
+    STANDING_SPEED,
+    STANDING_YAW_RATE,
+    TURN_YAW_RATE,
+    WALKING,
+    WINDOW_S,
+    motion_classes,
+    transitions,
+)
 from pimann.parallel import pool_map
 from pimann.params import FiguresParams, Params, as_dict
 from pimann.robot import SOLE_CORNERS, load_robot
-from pimann.rotations import yaw_of
 from pimann.trajectory import Trajectory, iter_collection
 
 # ----------------------------------------------------------------------------- thresholds
-WINDOW_S = 1.0  # s, centred window of the base velocity and yaw rate
-STANDING_SPEED = 0.1  # m/s, planar base speed below which the robot is not walking
-STANDING_YAW_RATE = 0.2  # rad/s, ... and below which it is standing, not turning in place
-TURN_YAW_RATE = 0.25  # rad/s, walking faster than this is turning
-FORWARD_DEG = 30.0  # velocity within +-30 deg of the heading
-SIDE_DEG = (60.0, 120.0)  # side steps, left or right
-BACKWARD_DEG = 150.0  # beyond +-150 deg
-MIN_STATE_S = 0.5  # s, standing and moving must each last this long for a start or stop
 MIN_CLASS_FRAMES = 500  # per-class foot metrics only over at least 10 s at 50 Hz
 PAPER_FRAMES = 500  # the paper's test: 500 frames (10 s at 50 Hz)
 GLIDE_HEIGHT = 0.005  # m, a sole corner this close to the floor is down
 GLIDE_TARGET = 0.1  # m/s, what the 95th percentile of a down corner's speed should not exceed
 GLIDE_PERCENTILE = 95.0
 
-CLASSES = ("forward", "backward", "side", "diagonal", "turning", "turning_in_place", "standing")
-WALKING = ("forward", "backward", "side", "diagonal", "turning")  # double support is over these
 RULES = ("evaluate_rule", "file_contacts")
 ALL = "all"  # the source of clips without a `dataset` attribute
 TOTAL = "total"
@@ -107,85 +103,6 @@ CLASS_COLOURS = {
     "standing": "0.7",
     "mixed": "tab:cyan",
 }
-
-
-# ----------------------------------------------------------------------------- motion classes
-
-
-def _window_bounds(n: int, half: int) -> tuple[np.ndarray, np.ndarray]:
-    frames = np.arange(n)
-    return np.maximum(frames - half, 0), np.minimum(frames + half, n - 1)
-
-
-def base_motion(trajectory: Trajectory, window_s: float = WINDOW_S):
-    """(T, 2) planar base velocity in the heading frame and (T,) yaw rate, window means."""
-    time = np.asarray(trajectory.time, dtype=float)
-    if len(time) < 2:
-        raise PimannError(trajectory.source, f"needs at least 2 frames, has {len(time)}")
-    half = max(1, round(window_s / 2 / frame_period(trajectory)))
-    lo, hi = _window_bounds(len(time), half)
-    span = time[hi] - time[lo]
-    rotations = Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()
-    yaw = np.unwrap(yaw_of(rotations))
-    sums = np.concatenate([[0.0], np.cumsum(yaw)])
-    heading = (sums[hi + 1] - sums[lo]) / (hi + 1 - lo)
-    position = np.asarray(trajectory.base_position, dtype=float)
-    world = (position[hi, :2] - position[lo, :2]) / span[:, None]
-    cos, sin = np.cos(heading), np.sin(heading)
-    velocity = np.stack(
-        [cos * world[:, 0] + sin * world[:, 1], -sin * world[:, 0] + cos * world[:, 1]], -1
-    )
-    return velocity, (yaw[hi] - yaw[lo]) / span
-
-
-def classify(velocity: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:
-    """(T,) index into `CLASSES` of each frame, from `base_motion`'s outputs."""
-    speed = np.linalg.norm(velocity, axis=-1)
-    angle = np.degrees(np.abs(np.arctan2(velocity[:, 1], velocity[:, 0])))
-    still = speed < STANDING_SPEED
-    code = {name: k for k, name in enumerate(CLASSES)}
-    return np.select(
-        [
-            still & (np.abs(yaw_rate) < STANDING_YAW_RATE),
-            still,
-            np.abs(yaw_rate) > TURN_YAW_RATE,
-            angle <= FORWARD_DEG,
-            angle >= BACKWARD_DEG,
-            (angle >= SIDE_DEG[0]) & (angle <= SIDE_DEG[1]),
-        ],
-        [
-            code["standing"],
-            code["turning_in_place"],
-            code["turning"],
-            code["forward"],
-            code["backward"],
-            code["side"],
-        ],
-        code["diagonal"],
-    )
-
-
-def motion_classes(trajectory: Trajectory) -> np.ndarray:
-    """(T,) index into `CLASSES` of each frame of a trajectory."""
-    return classify(*base_motion(trajectory))
-
-
-def transitions(moving: np.ndarray, min_frames: int) -> tuple[np.ndarray, np.ndarray]:
-    """Frames where a start (standing -> moving) and a stop (moving -> standing) happen.
-
-    Runs of either state shorter than `min_frames` are jitter: they are dropped, and a change
-    counts between the remaining runs of different states (at the first frame of the later).
-    """
-    moving = np.asarray(moving, dtype=bool)
-    if len(moving) == 0:
-        return np.empty(0, int), np.empty(0, int)
-    starts = np.flatnonzero(np.diff(moving.astype(int))) + 1
-    starts = np.concatenate([[0], starts])
-    lengths = np.diff(np.concatenate([starts, [len(moving)]]))
-    keep = lengths >= min_frames
-    starts, states = starts[keep], moving[starts[keep]].astype(int)
-    change = np.diff(states)
-    return starts[1:][change == 1], starts[1:][change == -1]
 
 
 # ----------------------------------------------------------------------------- per frame

@@ -42,6 +42,9 @@ from pimann.trajectory import Trajectory
 log = logging.getLogger(__name__)
 
 VARIANTS = ("full", "ground_projected")
+# the base pose p, psi in x and y: `world` as the paper (inertial position and unwrapped yaw),
+# `gravity` keeps only what gravity and the floor define (height, roll, pitch; x, y, yaw = 0)
+POSE_INPUTS = ("world", "gravity")
 MIN_STD = 1e-8  # a constant feature (e.g. roll of the ground-projected base) keeps std 1
 
 
@@ -57,6 +60,16 @@ class FeatureLayout:
     rate_hz: float
     variant: str
     n_joints: int = N_JOINTS
+    pose_input: str = "world"  # a key of POSE_INPUTS
+
+    def pose(self, position: np.ndarray, rpy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The base pose as the network sees it (input and output): `pose_input` applied."""
+        if self.pose_input == "world":
+            return position, rpy
+        position, rpy = np.array(position, dtype=float), np.array(rpy, dtype=float)
+        position[..., :2] = 0.0
+        rpy[..., 2] = 0.0
+        return position, rpy
 
     def _blocks(self, window: str, n: int) -> list[tuple[str, int]]:
         return [
@@ -162,6 +175,10 @@ def _like(values: np.ndarray, reference):
 
 def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> FeatureLayout:
     """The layout for the window named by `params.window`, offsets rounded to frames."""
+    if params.pose_input not in POSE_INPUTS:
+        raise PimannError(
+            None, f"features.pose_input {params.pose_input!r} is not one of {list(POSE_INPUTS)}"
+        )
     if params.window not in params.windows:
         raise PimannError(
             None, f"features.window {params.window!r} is not one of {sorted(params.windows)}"
@@ -173,7 +190,10 @@ def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> Featu
     def frames(seconds: list[float]) -> tuple[int, ...]:
         return tuple(int(round(s * rate_hz)) for s in seconds)
 
-    return FeatureLayout(frames(window.input_s), frames(window.output_s), rate_hz, variant)
+    return FeatureLayout(
+        frames(window.input_s), frames(window.output_s), rate_hz, variant,
+        pose_input=params.pose_input,
+    )  # fmt: skip
 
 
 def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:
@@ -229,7 +249,7 @@ def clip_features(
         return np.einsum("nij,nkj->nki", centre_t, at).reshape(len(steps), -1)
 
     def state(at: np.ndarray) -> list[np.ndarray]:
-        return [joints[at], joint_velocities[at], position[at], rpy[at]]
+        return [joints[at], joint_velocities[at], *layout.pose(position[at], rpy[at])]
 
     x = np.concatenate(
         [window(linear, layout.input_offsets), window(angular, layout.input_offsets)]

@@ -25,14 +25,16 @@ from matplotlib.figure import Figure
 
 from pimann.atomic import atomic_path
 from pimann.errors import PimannError
-from pimann.evaluate import BASELINE, pi_models, read_metrics, weight_label
+from pimann.evaluate import read_metrics
 from pimann.params import FiguresParams
 from pimann.robot import JOINT_NAMES
+from pimann.rollouts import BASELINE, pi_models, weight_label
 
 log = logging.getLogger(__name__)
 
 FORMATS = ("pdf", "png")
 BASELINE_COLOUR = "0.45"
+DATA_COLOUR = "tab:green"  # the retargeted data's own level
 CONDITIONS = {  # drift figures: (title, colour, line style)
     "base_baseline": ("Baseline", BASELINE_COLOUR, "-"),
     "base_pi": ("PI, no steering", "tab:red", "--"),
@@ -96,6 +98,11 @@ class Results:
         listed = self.provenance.get("pi_weights") or []
         return sorted({float(w) for w in listed} | set(pi_models(self.metrics)))
 
+    def data_level(self, metric: str) -> float | None:
+        """The retargeted data's own level of a sliding metric (median over all clips)."""
+        subset = self.summary.get("data_reference", {}).get("all") or {}
+        return (subset.get("metrics", {}).get(metric) or {}).get("median")
+
     def model_weight(self, series: str) -> float | None:
         """The PI weight of the rollout a time series came from."""
         model = self.summary.get("timeseries", {}).get(series, {}).get("model")
@@ -140,7 +147,8 @@ def _figure(figures: FiguresParams, height: float, rows: int = 1, cols: int = 1,
 def fig_pi_weight_comparison(results: Results, figures: FiguresParams) -> Figure | None:
     """Fig. pi_weight_comparison_plot: support-foot RMSE per w (boxes over seeds), baseline line.
 
-    Unsteered forward walking as in the paper; medians orange, means black diamonds.
+    Unsteered forward walking as in the paper; medians orange, means black diamonds; the
+    retargeted data's own level (forward walking, metrics_summary.json) as a line, "data".
     """
     frame = results.metrics
     frame = frame[(frame["scenario"] == figures.scenario) & ~frame["steering"]]
@@ -175,6 +183,9 @@ def fig_pi_weight_comparison(results: Results, figures: FiguresParams) -> Figure
         baseline = frame.loc[frame["model"] == BASELINE, metric].dropna()
         if len(baseline):
             ax.axhline(baseline.median(), color=BASELINE_COLOUR, ls="--", lw=1.0, label="baseline")
+        if (level := results.data_level(metric)) is not None:
+            ax.axhline(level, color=DATA_COLOUR, ls=":", lw=1.0, label="data")
+        if ax.get_legend_handles_labels()[0]:
             ax.legend(loc="upper right")
         ax.set_xlabel("PI weight $w$")
         ax.set_title(f"{kind} ({unit})")

@@ -228,7 +228,7 @@ class _Generator:
         self.params, self.steering, self.network = params, steering, _Network(model, layout, stats)
         self.dt = 1.0 / float(layout.rate_hz)
         self.projected = layout.variant == "ground_projected"
-        self.xs, self.ys = layout.x_slices, layout.y_slices
+        self.layout, self.xs, self.ys = layout, layout.x_slices, layout.y_slices
         in_offsets = np.asarray(layout.input_offsets)
         out_offsets = np.asarray(layout.output_offsets, dtype=float)
         self.current = layout.current_output
@@ -278,8 +278,7 @@ class _Generator:
             self.path = self.position.copy()
             if self.stopped:  # restart the network from the standing state
                 self.stopped, self.stop_from = False, None
-                self.history[:] = 0.0
-                self.future[:] = 0.0
+                self._start_windows(command)
                 self.fed_position = self.position.copy()
                 self.fed_rpy = np.array([*self.standing_rpy[:2], self.yaw])
         if not command.stand:  # a held command: the path (and the goal) move with it
@@ -303,6 +302,16 @@ class _Generator:
         elif not self.stopped and self._stop_now(k):
             self.stopped, self.stop_step = True, k
             self.stop_from = (self.joints.copy(), self.rotation.copy())
+
+    def _start_windows(self, command: Command) -> None:
+        """Velocity windows at a start: zero (standing) or the command held (`start_history`)."""
+        self.history[:] = 0.0
+        self.future[:] = 0.0
+        if self.params.start_history == "command":
+            linear = np.array([*_planar(yaw_of(self.rotation), command.velocity), 0.0])
+            self.history[0], self.history[1, :, 2] = linear, command.yaw_rate
+            self.future[0] = linear @ self.rotation  # R^T v
+            self.future[1] = self.rotation[2] * command.yaw_rate
 
     def _stop_now(self, k: int) -> bool:
         """Under 'stand': at once without steering; at, or past, the goal with it."""
@@ -343,7 +352,8 @@ class _Generator:
                 [history[taken] @ rotation, self.future_matrix @ future]
             ).ravel()
         self.x[xs["joints"]], self.x[xs["joint_velocities"]] = self.joints, self.joint_velocities
-        self.x[xs["base_position"]], self.x[xs["base_rpy"]] = self.fed_position, self.fed_rpy
+        fed = self.layout.pose(self.fed_position, self.fed_rpy)
+        self.x[xs["base_position"]], self.x[xs["base_rpy"]] = fed
         self.y = y = self.network(self.x)
 
         command_world = np.array([*_planar(yaw_of(rotation), command.velocity), 0.0])

@@ -6,13 +6,16 @@ inertial frame; summed over the trajectory per foot; left and right sums average
 RMSE"). The sum grows with the number of frames, so it compares trajectories of equal length
 and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported beside it.
 
-Sole velocities are pinocchio frame velocities in `evaluate.foot_velocity_frame`: by default
-LOCAL_WORLD_ALIGNED (the velocity of the sole origin and the sole's angular velocity, both in
-world axes: the paper's "foot velocity in the inertial frame"), or WORLD (inertial-fixed, as the
-authors' code computed it with iDynTree; its linear part grows with the distance from the
-origin), with the base velocity from central finite differences of q on the configuration
-manifold (`pinocchio.difference`) and the joint velocities from the file when it has them
-(else the same differences).
+Two levels: the velocity level (the paper's, `support_rmse_<linear|angular>_*`) combines the
+base twist from central finite differences of q on the configuration manifold
+(`pinocchio.difference`) with the file's joint velocities (a rollout's: the network's
+predicted ones; none: the same differences), so it measures how consistent the predicted
+velocities are with a still foot; the position level (`support_rmse_<part>_position_*`) takes
+every velocity from the differences alone: whether the feet of the trajectory a robot would
+track move. The linear part in `evaluate.foot_velocity_frame`: LOCAL_WORLD_ALIGNED (the sole
+origin's velocity in world axes, the paper's text) or WORLD (inertial-fixed, the authors' code:
+the velocity of the point at the world origin, v - omega x p); the WORLD linear part is always
+reported too (`support_rmse_linear[_position]_world_*`); the angular part is the same in both.
 
 Foot-skating ratio (motion-generation convention, defined at 20 fps): the trajectory's sole
 positions and lowest-corner heights are linearly interpolated to `skating_rate_hz`; a pair of
@@ -91,25 +94,55 @@ def manifold_velocities(model: pin.Model, configurations: np.ndarray, time: np.n
     return velocities
 
 
+# the sliding metrics: name (in `support_rmse_<name>_*`) -> (part, level, representation);
+# None: `evaluate.foot_velocity_frame`
+SLIDING = {
+    "linear": ("linear", "velocity", None),
+    "angular": ("angular", "velocity", None),
+    "linear_world": ("linear", "velocity", "world"),
+    "linear_position": ("linear", "position", None),
+    "angular_position": ("angular", "position", None),
+    "linear_position_world": ("linear", "position", "world"),
+}
+
+
+def in_representation(velocities: np.ndarray, positions: np.ndarray, frame: str) -> np.ndarray:
+    """(..., 6) LOCAL_WORLD_ALIGNED sole velocities in `frame` (a FOOT_VELOCITY_FRAMES key).
+
+    WORLD keeps the angular part and moves the linear one to the world origin: v - omega x p.
+    """
+    if FOOT_VELOCITY_FRAMES[frame] == pin.LOCAL_WORLD_ALIGNED:
+        return velocities
+    out = velocities.copy()
+    out[..., :3] -= np.cross(velocities[..., 3:], positions)
+    return out
+
+
 @dataclasses.dataclass
 class _Analysis:
     """Per-frame quantities every metric and plot is computed from."""
 
     time: np.ndarray
-    feet: FootKinematics
+    feet: FootKinematics  # velocities: velocity level, in the params' representation
+    sole_velocities: dict[str, np.ndarray]  # level -> (T, 2, 6) LOCAL_WORLD_ALIGNED
+    frame: str  # evaluate.foot_velocity_frame
     contacts: np.ndarray  # (T, 2) bool
     contacts_source: str
     joint_velocities_source: str
     displacement: np.ndarray  # (T, 3) base, start heading frame
     angles: np.ndarray  # (T, 3) roll, pitch, yaw changes since the first frame
 
-    @property
-    def rms_linear(self) -> np.ndarray:  # (T, 2)
-        return np.sqrt(np.mean(self.feet.velocities[..., :3] ** 2, axis=-1))
+    def velocities(self, level: str, frame: str | None = None) -> np.ndarray:
+        """(T, 2, 6) sole velocities of a level in a representation (None: the params')."""
+        return in_representation(
+            self.sole_velocities[level], self.feet.positions, frame or self.frame
+        )
 
-    @property
-    def rms_angular(self) -> np.ndarray:  # (T, 2)
-        return np.sqrt(np.mean(self.feet.velocities[..., 3:] ** 2, axis=-1))
+    def rms(self, name: str) -> np.ndarray:
+        """(T, 2) per-frame RMS of a `SLIDING` metric, every frame (contact or not)."""
+        part, level, frame = SLIDING[name]
+        components = slice(0, 3) if part == "linear" else slice(3, 6)
+        return np.sqrt(np.mean(self.velocities(level, frame)[..., components] ** 2, axis=-1))
 
 
 def _euler_rpy(rotations: np.ndarray) -> np.ndarray:
@@ -163,23 +196,51 @@ def _check_time(trajectory: Trajectory) -> np.ndarray:
     return time
 
 
-def _analyse(trajectory: Trajectory, robot: Robot, params: EvaluateParams) -> _Analysis:
+def _analyse(
+    trajectory: Trajectory, robot: Robot, params: EvaluateParams, file_contacts: bool = True
+) -> _Analysis:
     time = _check_time(trajectory)
     configurations = trajectory_configurations(robot, trajectory)
-    velocities = manifold_velocities(robot.model, configurations, time)
-    joint_source = "differences"
+    differences = manifold_velocities(robot.model, configurations, time)
+    velocities, joint_source = differences, "differences"
     if trajectory.joint_velocities is not None:
+        velocities = differences.copy()
         velocities[:, robot.v_index] = trajectory.joint_velocities
         joint_source = "file"
-    reference = FOOT_VELOCITY_FRAMES[params.foot_velocity_frame]
-    feet = foot_kinematics(robot, configurations, velocities, reference)
-    if trajectory.contacts is not None:
+    feet = foot_kinematics(robot, configurations, velocities)  # LOCAL_WORLD_ALIGNED
+    levels = {"velocity": feet.velocities, "position": feet.velocities}
+    if velocities is not differences:
+        levels["position"] = foot_kinematics(robot, configurations, differences).velocities
+    feet.velocities = in_representation(feet.velocities, feet.positions, params.foot_velocity_frame)
+    if file_contacts and trajectory.contacts is not None:
         contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
     else:
         contacts = contacts_from_heights(feet.heights, frame_period(trajectory), params)
         contacts_source = "detected"
     displacement, angles = base_drift(trajectory)
-    return _Analysis(time, feet, contacts, contacts_source, joint_source, displacement, angles)
+    return _Analysis(
+        time, feet, levels, params.foot_velocity_frame, contacts, contacts_source,
+        joint_source, displacement, angles,
+    )  # fmt: skip
+
+
+def sliding_frames(
+    trajectory: Trajectory,
+    robot: Robot | None = None,
+    params: EvaluateParams | None = None,
+    file_contacts: bool = True,
+) -> dict[str, np.ndarray]:
+    """{`SLIDING` name: (T, 2) contact-masked per-frame RMS}, plus "contacts" (T, 2).
+
+    Summed over the frames these are the total RMSE's per-foot sums. `file_contacts=False`
+    detects the contacts by the evaluate rule even where the file has its own.
+    """
+    robot = robot or load_robot("retarget")
+    params = params or load_params().evaluate
+    a = _analyse(trajectory, robot, params, file_contacts)
+    out = {name: np.where(a.contacts, a.rms(name), 0.0) for name in SLIDING}
+    out["contacts"] = a.contacts
+    return out
 
 
 def skating_ratio(
@@ -227,14 +288,17 @@ def trajectory_metrics(
         "contacts_source": a.contacts_source,
         "joint_velocities_source": a.joint_velocities_source,
     }
-    for kind, rms in (("linear", a.rms_linear), ("angular", a.rms_angular)):
+    for name in SLIDING:
+        rms = a.rms(name)
         sums = np.where(contacts, rms, 0.0).sum(axis=0)
         for side, value in zip(SIDES, sums, strict=True):
-            metrics[f"support_rmse_{kind}_{side}"] = float(value)
-        metrics[f"support_rmse_{kind}_total"] = float(sums.mean())
-        metrics[f"support_rmse_{kind}_mean_per_contact_frame"] = _mean_where(rms, contacts)
-    horizontal_speed = np.linalg.norm(a.feet.velocities[..., :2], axis=-1)
-    metrics["contact_foot_speed_mean"] = _mean_where(horizontal_speed, contacts)
+            metrics[f"support_rmse_{name}_{side}"] = float(value)
+        metrics[f"support_rmse_{name}_total"] = float(sums.mean())
+        if name in ("linear", "angular"):
+            metrics[f"support_rmse_{name}_mean_per_contact_frame"] = _mean_where(rms, contacts)
+    for suffix, level in (("", "velocity"), ("_position", "position")):
+        horizontal_speed = np.linalg.norm(a.velocities(level)[..., :2], axis=-1)
+        metrics[f"contact_foot_speed_mean{suffix}"] = _mean_where(horizontal_speed, contacts)
     metrics["skating_ratio"] = _finite_or_none(
         skating_ratio(a.time, a.feet.positions, a.feet.heights, params)
     )
@@ -269,7 +333,7 @@ def trajectory_time_series(
     for k, name in enumerate(("base_roll", "base_pitch", "base_yaw")):
         columns[name] = a.angles[:, k]
     heights, pitches = a.feet.heights, a.feet.pitches
-    rms_linear, rms_angular = a.rms_linear, a.rms_angular
+    rms_linear, rms_angular = a.rms("linear"), a.rms("angular")
     for f, side in enumerate(SIDES):
         columns[f"{side}_foot_height"] = heights[:, f]
         columns[f"{side}_sole_x"] = a.feet.positions[:, f, 0]

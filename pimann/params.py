@@ -108,6 +108,7 @@ class FeaturesParams:
     test_fraction: float  # share of source clips (each with its mirror) held out
     split_seed: int
     contact_margin_s: float  # carried contact flags drop this long around every switch
+    pose_input: Literal["world", "gravity"]  # the base pose the network sees (features.py)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -175,6 +176,7 @@ class RolloutParams:
     planar_steering: bool  # authors' code: horizontal position error in the yaw frame only
     held_command: Literal["progress", "carrot"]  # how the goal moves while a command holds
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
+    start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     scenarios: dict[str, list[MotionSegment | StandSegment]]
     scenario_names: list[str]  # the scenarios the DVC rollout stage generates
 

@@ -1,5 +1,6 @@
 """DVC stage `evaluate`: results/rollouts -> results/metrics.csv, metrics_summary.json,
-timeseries/*.csv and claims.md (pimann.evaluate)."""
+timeseries/*.csv and claims.md (pimann.evaluate, pimann.claims), with the retargeted data's own
+sliding level (pimann.data_reference) beside."""
 
 from __future__ import annotations
 
@@ -24,12 +25,14 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--workers", type=int, default=2)
+    parser.add_argument("--data", type=Path, help="retargeted collection (default: features.input)")
     args = parser.parse_args(argv)
     params = load_params()
     started = time.perf_counter()
     claims = evaluate_all(
-        REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers)
-    )
+        REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers),
+        args.data,
+    )  # fmt: skip
     for claim in claims:
         log.info("%s %s: %s", claim.id, claim.status, claim.claim)
     log.info("profile %s: evaluated in %.0f s", params.profile, time.perf_counter() - started)

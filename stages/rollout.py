@@ -4,7 +4,7 @@
 
 rolls out every seed of the training output in every scenario of `rollout.scenario_names`,
 with and without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
-the models' meta in <out>/models.json (layout: pimann.evaluate).
+the models' meta in <out>/models.json (layout: pimann.rollouts).
 """
 
 from __future__ import annotations
@@ -15,10 +15,10 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.evaluate import run_rollouts
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.rollouts import run_rollouts
 from pimann.stage import stage_entry
 
 log = logging.getLogger("rollout")

@@ -12,6 +12,7 @@ from conftest import EVALUATE_PARAMS
 from scipy.spatial.transform import Rotation
 
 from pimann import data_report as dr
+from pimann import motion_classes as mc
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
 from pimann.robot import STANDING_BASE_HEIGHT, STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
@@ -70,7 +71,7 @@ def test_constant_velocity_is_classified_in_the_heading_frame(angle, expected):
     heading = 0.7  # the classes are relative to the heading, not to the world axes
     trajectory = make_trajectory(line(0.8, heading + angle, 4.0), yaw=heading)
     assert classes_of(trajectory) == {expected}
-    velocity, yaw_rate = dr.base_motion(trajectory)
+    velocity, yaw_rate = mc.base_motion(trajectory)
     np.testing.assert_allclose(
         velocity, np.tile([0.8 * math.cos(angle), 0.8 * math.sin(angle)], (200, 1)), atol=1e-9
     )

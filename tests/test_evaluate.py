@@ -1,5 +1,5 @@
-"""Evaluation (issue 4): rollout layout, seed statistics, claims on crafted numbers, and the
-rollout -> evaluate path end to end on tiny real models (real MANN, generate, pinocchio)."""
+"""Evaluation (issue 4): seed statistics, results and provenance, and the rollout -> evaluate
+path end to end on tiny real models (real MANN, generate, pinocchio)."""
 
 from __future__ import annotations
 
@@ -10,82 +10,28 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from test_claims import REFERENCE, crafted_metrics
+from test_data_reference import walking_clip
 
+from pimann.claims import claims_markdown
 from pimann.errors import PimannError
 from pimann.evaluate import (
-    BASELINE,
-    FAILS,
-    HOLDS,
-    NOT_COMPARABLE,
-    RolloutKey,
-    claims_markdown,
     evaluate_all,
-    evaluate_claims,
-    parse_rollout_path,
     provenance,
     read_metrics,
     representative_seed,
-    rollout_path,
-    run_rollouts,
     summarise,
     write_results,
 )
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
-from pimann.trajectory import read_trajectory
-
-WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
-# seed medians of a study that agrees with the paper
-AGREEING = {
-    "support_rmse_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9, "w100": 15},
-    "support_rmse_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5, "w100": 9},
-    "contact_sole_pitch_max_abs": {BASELINE: 0.1, "w0": 0.05, "w1": 0.06, "w10": 0.08,
-                                   "w20": 0.09, "w100": 0.3},
-    "contact_foot_speed_mean": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1, "w20": 0.1,
-                                "w100": 0.2},
-}  # fmt: skip
-
-
-def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFrame:
-    """metrics.csv rows: median over seeds = `values` (seed offsets -2..2 x 1 %)."""
-    rows = []
-    for model, weight in WEIGHTS.items():
-        for seed in seeds:
-            for steering in (False, True):
-                offset = 1.0 + 0.01 * (seed - 2)
-                row = {
-                    "model": model, "variant": "ground_projected" if model == BASELINE else "full",
-                    "pi_weight": weight, "seed": seed, "scenario": "forward",
-                    "steering": steering, "rollout": f"{model}/{seed}/forward.h5",
-                }  # fmt: skip
-                for metric, by_model in values.items():
-                    row[metric] = by_model[model] * offset
-                unsteered_pi = model != BASELINE and not steering
-                row["drift_y_max_abs"] = 0.8 if unsteered_pi else 0.3 if not steering else 0.05
-                row["drift_yaw_max_abs"] = 0.6 if unsteered_pi else 0.2 if not steering else 0.02
-                row["drift_y_max_abs"] *= offset
-                row["walks"] = not (model == "w100" and not steering)
-                row["skating_ratio"] = 0.1 * offset
-                rows.append(row)
-    return pd.DataFrame(rows)
+from pimann.rollouts import BASELINE, run_rollouts
+from pimann.trajectory import read_trajectory, write_collection
 
 
 @pytest.fixture(scope="module")
 def params():
     return load_params()
-
-
-def statuses(claims) -> dict[str, str]:
-    return {c.id: c.status for c in claims}
-
-
-def test_rollout_paths_round_trip(tmp_path):
-    key = RolloutKey("w10", 3, "turn-left", True)
-    path = rollout_path(tmp_path, key)
-    assert path == tmp_path / "w10" / "3" / "turn-left-steering.h5"
-    assert parse_rollout_path(tmp_path, path) == key
-    with pytest.raises(PimannError, match="not <model>"):
-        parse_rollout_path(tmp_path, tmp_path / "w10" / "3" / "forward-maybe.h5")
 
 
 def test_summary_matches_numpy_on_crafted_data():
@@ -107,44 +53,6 @@ def test_summary_matches_numpy_on_crafted_data():
         assert walks["mean"] == pytest.approx(group["walks"].mean())
 
 
-def test_claims_hold_on_agreeing_numbers(params):
-    claims = statuses(evaluate_claims(crafted_metrics(), params.figures))
-    assert claims["C1"] == NOT_COMPARABLE  # absolute numbers never compare
-    for claim in ("C2", "C3", "C4", "C5", "C6", "C7", "C8", "C9", "C10", "C11", "C12", "C13",
-                  "C14"):  # fmt: skip
-        assert claims[claim] == HOLDS, claim
-
-
-def test_claims_fail_on_contradicting_numbers(params):
-    values = {k: dict(v) for k, v in AGREEING.items()}
-    values["support_rmse_linear_total"].update(w0=6, w1=8, w10=10)  # increasing with w
-    values["support_rmse_angular_total"][("w20")] = 25  # above the baseline
-    values["contact_sole_pitch_max_abs"].update(w0=0.3, w1=0.2, w10=0.1, w20=0.05, w100=0.04)
-    values["contact_foot_speed_mean"].update(w10=0.25)
-    frame = crafted_metrics(values)
-    frame.loc[frame["model"] == "w100", "walks"] = True  # w=100 walks unsteered too
-    # steering leaves the yaw drift of w=10 as large as without
-    steered_w10 = (frame["model"] == "w10") & frame["steering"]
-    frame.loc[steered_w10, "drift_yaw_max_abs"] = 0.6
-    claims = statuses(evaluate_claims(frame, params.figures))
-    assert claims["C2"] == HOLDS  # linear still below the baseline for every w
-    assert claims["C3"] == FAILS
-    assert claims["C5"] == FAILS
-    assert claims["C7"] == FAILS and claims["C8"] == HOLDS
-    assert claims["C9"] == FAILS
-    assert claims["C10"] == HOLDS and claims["C11"] == FAILS
-    assert claims["C13"] == FAILS  # steered yaw drift above the baseline's
-    assert claims["C14"] == FAILS
-
-
-def test_claims_without_baseline_are_not_comparable(params):
-    frame = crafted_metrics()
-    claims = statuses(evaluate_claims(frame[frame["model"] != BASELINE], params.figures))
-    for claim in ("C1", "C2", "C3", "C4", "C12", "C13"):
-        assert claims[claim] == NOT_COMPARABLE, claim
-    assert claims["C5"] == HOLDS
-
-
 def test_representative_seed_is_the_median_one():
     frame = crafted_metrics()
     rows = (frame["model"] == "w10") & ~frame["steering"]
@@ -155,8 +63,9 @@ def test_representative_seed_is_the_median_one():
 
 def test_results_record_provenance(params, tmp_path):
     info = provenance(params)
-    claims = write_results(crafted_metrics(), tmp_path, params, info)
+    claims = write_results(crafted_metrics(), tmp_path, params, info, None, REFERENCE)
     summary = json.loads((tmp_path / "metrics_summary.json").read_text())
+    assert summary["data_reference"] == REFERENCE
     assert summary["provenance"]["profile"] == params.profile
     assert summary["provenance"]["params"]["figures"]["pi_weight"] == params.figures.pi_weight
     text = (tmp_path / "claims.md").read_text()
@@ -165,7 +74,9 @@ def test_results_record_provenance(params, tmp_path):
     back = read_metrics(tmp_path / "metrics.csv")
     assert set(back["profile"]) == {params.profile} and len(back) == len(crafted_metrics())
     assert back["steering"].dtype == bool and back["steering"].sum() == len(back) // 2
-    assert claims_markdown(claims, info) == text
+    assert claims_markdown(claims, info, REFERENCE) == text and "| D | data" in text
+    for metric in ("support_rmse_linear_world_total", "support_rmse_linear_position_total"):
+        assert metric in summary["summary"]["forward"]["nosteering"]["w10"]["metrics"]
 
 
 def _tiny_models(root, weight: float, variant: str, seeds):
@@ -211,7 +122,9 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert first.attrs["seed"] == 1 and first.attrs["pi_weight"] == 10.0
 
     results = tmp_path / "results"
-    claims = evaluate_all(rollouts, results, short, workers=1)
+    data = tmp_path / "walking.h5"  # the data's level: one clip at 0.5 m/s, one standing
+    write_collection(data, [("a", walking_clip(0.5, 300, "a")), ("b", walking_clip(0.0, 300, "b"))])
+    claims = evaluate_all(rollouts, results, short, workers=1, data=data)
     frame = read_metrics(results / "metrics.csv")
     assert len(frame) == 6 and set(frame["model"]) == {"w10", BASELINE}
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
@@ -228,6 +141,11 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     summary = json.loads((results / "metrics_summary.json").read_text())
     assert summary["provenance"]["clips"] == 3 and summary["provenance"]["epochs"] == 3
     assert summary["timeseries"]["base_pi"]["model"] == "w10"
+    reference = summary["data_reference"]
+    assert reference["collection"] == str(data) and reference["all"]["used"] == 1
+    linear = reference["all"]["metrics"]["support_rmse_linear_total"]["median"]
+    assert linear == pytest.approx(500 * 0.5 / np.sqrt(3), rel=1e-6)
+    assert "| D | data (retargeted, forward walking)" in (results / "claims.md").read_text()
     assert {c.id for c in claims} >= {"C1", "C2", "C14"}
 
 

@@ -141,6 +141,33 @@ def test_ground_projected_variant_zeroes_roll_and_pitch(params):
     np.testing.assert_allclose(angular, np.broadcast_to([0, 0, yaw_rate], angular.shape), atol=1e-9)
 
 
+def test_gravity_pose_input_keeps_height_roll_pitch_and_zeroes_the_rest(params):
+    velocity, yaw_rate = np.array([0.4, 0.1, 0.02]), 0.5
+    clip = synthetic_clip(200, velocity, yaw_rate)
+    world = window_layout(params.features, RATE, "full")
+    gravity_params = dataclasses.replace(params.features, pose_input="gravity")
+    gravity = window_layout(gravity_params, RATE, "full")
+    assert FeatureLayout.from_json(gravity.to_json()) == gravity
+    x_world, y_world, _ = clip_features(clip, world)
+    x, y, steps = clip_features(clip, gravity)
+    for features, reference, slices in (
+        (x, x_world, gravity.x_slices),
+        (y, y_world, gravity.y_slices),
+    ):
+        position, rpy = features[:, slices["base_position"]], features[:, slices["base_rpy"]]
+        np.testing.assert_array_equal(position[:, :2], 0.0)
+        np.testing.assert_array_equal(rpy[:, 2], 0.0)
+        np.testing.assert_array_equal(position[:, 2], reference[:, slices["base_position"]][:, 2])
+        np.testing.assert_array_equal(rpy[:, :2], reference[:, slices["base_rpy"]][:, :2])
+    # everything else is unchanged; the world layout moves with the clip, gravity does not
+    rest = np.ones(x.shape[1], bool)
+    rest[gravity.x_slices["base_position"]] = rest[gravity.x_slices["base_rpy"]] = False
+    np.testing.assert_array_equal(x[:, rest], x_world[:, rest])
+    assert np.ptp(x_world[:, world.x_slices["base_position"]][:, 0]) > 0.5
+    with pytest.raises(PimannError, match="pose_input"):
+        window_layout(dataclasses.replace(params.features, pose_input="nope"), RATE, "full")
+
+
 def test_split_keeps_mirrors_with_their_clip_and_does_not_leak(params):
     clips = synthetic_collection(n_sources=10)
     features = dataclasses.replace(params.features, test_fraction=0.2)

@@ -10,12 +10,13 @@ import h5py
 import numpy as np
 import pandas as pd
 import pytest
-from test_evaluate import crafted_metrics
+from test_claims import REFERENCE, crafted_metrics
 
-from pimann.evaluate import RolloutKey, provenance, write_results
+from pimann.evaluate import provenance, write_results
 from pimann.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
 from pimann.params import load_params
 from pimann.robot import JOINT_NAMES
+from pimann.rollouts import RolloutKey
 
 
 @pytest.fixture(scope="module")
@@ -23,7 +24,7 @@ def params():
     return load_params()
 
 
-def crafted_results(root, params, profile: str = "quick", sim: bool = True):
+def crafted_results(root, params, profile: str = "quick", sim: bool = True, data: bool = True):
     """results/ as the evaluate stage writes it, with sinusoidal time series."""
     frame = crafted_metrics()
     selection = {
@@ -33,7 +34,7 @@ def crafted_results(root, params, profile: str = "quick", sim: bool = True):
         **{f"feet_w{w}": RolloutKey(f"w{w}", 2, "forward", False) for w in (0, 1, 10, 20, 100)},
     }
     info = {**provenance(params), "profile": profile}
-    write_results(frame, root, params, info, selection)
+    write_results(frame, root, params, info, selection, REFERENCE if data else None)
     t = np.arange(500) / 50.0
     (root / "timeseries").mkdir()
     for k, name in enumerate(("base_baseline", "base_pi", "base_pi_steering")):
@@ -111,6 +112,19 @@ def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
     rows = (frame["model"] == "baseline") & ~frame["steering"]
     expected = np.median(frame.loc[rows, "support_rmse_linear_total"])
     assert baseline and baseline[0].get_ydata()[0] == pytest.approx(expected)
+
+
+def test_box_plot_shows_the_data_level(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    for ax, metric in zip(fig.axes, ("linear", "angular"), strict=True):
+        lines = [line for line in ax.get_lines() if line.get_label() == "data"]
+        expected = REFERENCE["all"]["metrics"][f"support_rmse_{metric}_total"]["median"]
+        assert len(lines) == 1 and lines[0].get_ydata()[0] == pytest.approx(expected)
+        assert "data" in [t.get_text() for t in ax.get_legend().get_texts()]
+    results = load_results(crafted_results(tmp_path / "bare", params, data=False))
+    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    assert not [line for line in fig.axes[0].get_lines() if line.get_label() == "data"]
 
 
 def test_figures_follow_params(params, tmp_path):

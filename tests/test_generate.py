@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 import torch
+from scipy.spatial.transform import Rotation
 from torch import nn
 
 from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configurations
@@ -183,6 +184,45 @@ def test_gait_walks_forward_with_alternating_contacts(robot, params):
     swings = [np.flatnonzero(np.diff(trajectory.contacts[:, f].astype(int)) == -1) for f in (0, 1)]
     assert min(len(s) for s in swings) >= 8  # ~one lift-off per foot and second
     assert (np.diff(rollout.support) != 0).sum() >= 16
+
+
+class RecordingGait(GaitModel):
+    """The gait model, keeping every input it is given (physical units: identity stats)."""
+
+    def __init__(self, robot):
+        super().__init__(robot)
+        self.inputs: list[torch.Tensor] = []
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        self.inputs.append(x.detach().clone())
+        return super().forward(x)
+
+
+@pytest.mark.parametrize("start", ["zero", "command"])
+def test_start_history_feeds_the_command_or_standing_at_a_start(robot, params, start):
+    scenario = [StandSegment(0.5, True), MotionSegment(2.0, 0.4, -0.1, 0.2)]
+    model = RecordingGait(robot)
+    trajectory = roll(model, scenario, params, False, robot, start_history=start).trajectory
+    first = model.inputs[0][0].numpy()  # the first network step, from standing
+    linear = first[LAYOUT.x_slices["base_linear_window"]].reshape(-1, 3)
+    angular = first[LAYOUT.x_slices["base_angular_window"]].reshape(-1, 3)
+    # the base starts at standing yaw 0 with the standing pitch: the command in the base frame
+    rotation = Rotation.from_quat(trajectory.base_quaternion_xyzw[25]).as_matrix()
+    expected_linear = np.array([0.4, -0.1, 0.0]) @ rotation
+    expected_angular = rotation[2] * 0.2
+    if start == "zero":
+        np.testing.assert_array_equal(linear, 0.0)
+        np.testing.assert_array_equal(angular, 0.0)
+    else:
+        np.testing.assert_allclose(
+            linear, np.broadcast_to(expected_linear, linear.shape), atol=1e-6
+        )
+        np.testing.assert_allclose(
+            angular, np.broadcast_to(expected_angular, angular.shape), atol=1e-6
+        )
+    # a held command from the start: the gait model's speed is the command from the first step
+    speed = np.linalg.norm(trajectory.base_position[-1, :2] - trajectory.base_position[25, :2])
+    assert (speed > 0.5) if start == "command" else (speed > 0.3)
 
 
 def test_orientation_integrates_the_angular_velocity(robot, params):

@@ -13,6 +13,7 @@ from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
 from pimann.errors import PimannError
 from pimann.metrics import (
     aggregate,
+    in_representation,
     manifold_velocities,
     metrics_for_file,
     trajectory_metrics,
@@ -151,6 +152,88 @@ def test_world_representation_is_the_velocity_at_the_origin(robot):
     expected = FRAMES * spin * lever / SQRT3
     assert metrics["support_rmse_linear_left"] == pytest.approx(expected, rel=2e-3)
     assert metrics["support_rmse_angular_left"] == pytest.approx(FRAMES * spin / SQRT3, rel=1e-3)
+
+
+def test_world_columns_whatever_the_params(robot):
+    """The authors' representation is reported beside ours: a sole turning in place at p."""
+    spin = 0.5
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS)
+    lever = np.hypot(0.3, 0.2)
+    assert metrics["support_rmse_linear_left"] < 0.05  # local_world_aligned: the origin is still
+    expected = FRAMES * spin * lever / SQRT3
+    assert metrics["support_rmse_linear_world_left"] == pytest.approx(expected, rel=2e-3)
+    assert metrics["support_rmse_linear_position_world_left"] == pytest.approx(expected, rel=2e-3)
+
+
+def test_world_representation_matches_pinocchio(robot, rng):
+    """v - omega x p of the LOCAL_WORLD_ALIGNED velocity is pinocchio's WORLD frame velocity."""
+    model, data = robot.model, robot.model.createData()
+    for _ in range(3):
+        q, v = random_configuration(robot, rng), rng.normal(size=model.nv)
+        pin.forwardKinematics(model, data, q, v)
+        for frame in FEET:
+            frame_id = robot.frame_id(frame)
+            position = pin.updateFramePlacement(model, data, frame_id).translation
+            local = pin.getFrameVelocity(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED).vector
+            world = pin.getFrameVelocity(model, data, frame_id, pin.WORLD).vector
+            np.testing.assert_allclose(
+                in_representation(local, position, "world"), world, atol=1e-10
+            )
+            assert in_representation(local, position, "local_world_aligned") is local
+
+
+def _still_feet_joint_velocities(robot, trajectory) -> np.ndarray:
+    """Leg joint velocities that cancel the base's motion at both soles (J_legs qd = -J_base v)."""
+    model, data = robot.model, robot.model.createData()
+    q = trajectory_configurations(robot, trajectory)
+    v = manifold_velocities(model, q, trajectory.time)
+    out = np.zeros((len(q), len(JOINT_NAMES)))
+    for k in range(len(q)):
+        pin.computeJointJacobians(model, data, q[k])
+        pin.updateFramePlacements(model, data)
+        for frame, prefix in zip(FEET, ("l_", "r_"), strict=True):
+            jacobian = pin.getFrameJacobian(
+                model, data, robot.frame_id(frame), pin.LOCAL_WORLD_ALIGNED
+            )
+            legs = [
+                j for j, name in enumerate(JOINT_NAMES)
+                if name.startswith(prefix) and any(p in name for p in ("hip", "knee", "ankle"))
+            ]  # fmt: skip
+            columns = jacobian[:, robot.v_index[legs]]
+            out[k, legs] = np.linalg.lstsq(columns, -jacobian[:, :6] @ v[k, :6], rcond=None)[0]
+    return out
+
+
+def test_position_level_ignores_the_predicted_joint_velocities(robot):
+    """The standing robot slides along its heading at 0.15 m/s while the file's joint
+    velocities claim still feet: the velocity level (the predictions' consistency) reads ~0,
+    the position level (the feet a robot would track) reads the known speed."""
+    trajectory = line_trajectory(robot, distance=1.5, frames=100)  # 1.5 m in 10 s
+    trajectory.joint_velocities = _still_feet_joint_velocities(robot, trajectory)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    assert metrics["contact_fraction_left"] == 1.0 and metrics["contact_fraction_right"] == 1.0
+    assert metrics["support_rmse_linear_total"] < 1e-6
+    assert metrics["support_rmse_angular_total"] < 1e-6
+    expected = 100 * 0.15 / SQRT3
+    assert metrics["support_rmse_linear_position_total"] == pytest.approx(expected, rel=1e-6)
+    assert metrics["support_rmse_angular_position_total"] < 1e-6
+    assert metrics["contact_foot_speed_mean_position"] == pytest.approx(0.15, rel=1e-6)
+    assert metrics["contact_foot_speed_mean"] < 1e-6
+
+
+def test_both_levels_agree_when_the_file_velocities_are_the_true_ones(robot):
+    trajectory = stance_trajectory(robot, slide=0.05, joint_velocities=True)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    expected = FRAMES * 0.05 / SQRT3
+    for name in ("linear", "linear_position"):
+        assert metrics[f"support_rmse_{name}_left"] == pytest.approx(expected, abs=2e-2), name
+    # wrong file velocities (zero) move the velocity level only
+    trajectory.joint_velocities = np.zeros_like(trajectory.joint_velocities)
+    wrong = trajectory_metrics(trajectory, robot, PARAMS)
+    assert abs(wrong["support_rmse_linear_left"] - expected) > 1.0
+    assert wrong["support_rmse_linear_position_left"] == pytest.approx(
+        metrics["support_rmse_linear_position_left"], rel=1e-12
+    )
 
 
 def test_still_foot_residual_is_second_order_in_the_frame_period(robot):
