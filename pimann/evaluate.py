@@ -4,7 +4,8 @@ Reads the rollouts (layout: pimann.rollouts) and writes under results/ (`write_r
 metrics.csv (one row per rollout: every pimann.metrics value), metrics_summary.json (median,
 IQR, min, max over the seeds; the data's own level of the sliding metrics under
 "data_reference", pimann.data_reference), timeseries/*.csv and claims.md (pimann.claims),
-each with the profile and the params it came from.
+each with the profile and the params it came from; and the command-following benchmark
+(pimann.following): command_following.csv, .md and .png.
 """
 
 from __future__ import annotations
@@ -38,6 +39,7 @@ from pimann.rollouts import (
     STEERING_LABEL,
     RolloutKey,
     find_rollouts,
+    is_clip,
     pi_models,
     rollout_path,
     select_rows,
@@ -141,9 +143,11 @@ def sort_rows(frame: pd.DataFrame) -> pd.DataFrame:
 
 
 def summarise(frame: pd.DataFrame, metrics: Sequence[str] = SUMMARY_METRICS) -> dict[str, Any]:
-    """{scenario: {steering label: {model: {metric: median, q1, q3, iqr, min, max, ...}}}}."""
+    """{scenario: {steering label: {model: {metric: median, q1, q3, iqr, min, max, ...}}}} of
+    the named scenarios (the benchmark clips' rollouts stay in metrics.csv)."""
     summary: dict[str, Any] = {}
     columns = [m for m in metrics if m in frame]
+    frame = frame[~frame["scenario"].map(is_clip)]
     for (scenario, steering, model), group in frame.groupby(
         ["scenario", "steering", "model"], sort=False
     ):
@@ -307,11 +311,13 @@ def evaluate_all(
     workers: int = 2,
     data: str | Path | None = None,
 ) -> list[Claim]:
-    """The whole evaluate stage: metrics, summary, time series, the data's level, claims.
+    """The whole evaluate stage: metrics, summary, time series, the data's level, claims, and
+    command following (pimann.following, with the test clips' own level).
 
     `data`: the retargeted collection the models learn from (default: features.input).
     """
     from pimann.data_reference import data_reference
+    from pimann.following import collect_following, write_following
 
     frame = collect_metrics(rollouts_dir, params, workers)
     selection = timeseries_selection(frame, params.figures)
@@ -319,4 +325,7 @@ def evaluate_all(
     name = params.features.input if data is None else data
     reference = data_reference(REPO_ROOT / name, params, workers, str(name))
     info = provenance(params, rollouts_dir)
-    return write_results(frame, results_dir, params, info, selection, reference)
+    claims = write_results(frame, results_dir, params, info, selection, reference)
+    following = collect_following(rollouts_dir, params, workers, REPO_ROOT / name)
+    write_following(following, results_dir, params, info)
+    return claims

@@ -370,9 +370,13 @@ FIGURES: dict[str, Callable[[Results, FiguresParams], Figure | None]] = {
 
 
 def save_figure(
-    fig: Figure, out_dir: str | Path, name: str, provenance: dict[str, Any]
+    fig: Figure,
+    out_dir: str | Path,
+    name: str,
+    provenance: dict[str, Any],
+    formats: tuple[str, ...] = FORMATS,
 ) -> list[Path]:
-    """`name`.pdf and `name`.png, atomically, with the provenance in their metadata."""
+    """`name`.pdf and `name`.png (`formats`), atomically, with the provenance in their metadata."""
     _footer(fig, provenance)
     summary = json.dumps(
         {k: provenance.get(k) for k in ("profile", "epochs", "clips", "seeds", "scenario")},
@@ -385,7 +389,7 @@ def save_figure(
         "png": {"Title": name, "Description": f"pimann {summary}", "Software": "pimann.figures"},
     }  # fmt: skip
     paths = []
-    for fmt in FORMATS:
+    for fmt in formats:
         target = Path(out_dir) / f"{name}.{fmt}"
         with atomic_path(target) as tmp:
             fig.savefig(tmp, format=fmt, metadata=metadata[fmt])

@@ -482,14 +482,24 @@ def generate_file(
     steering: bool = True,
     params: Params | None = None,
     params_path: str | Path = DEFAULT_PARAMS,
+    segments: Sequence[Segment] | None = None,
 ) -> Trajectory:
-    """`pimann generate MODEL_DIR --scenario NAME -o OUT.h5 [--no-steering]`: written atomically."""
+    """`pimann generate MODEL_DIR --scenario NAME -o OUT.h5 [--no-steering]`: written atomically.
+
+    `segments`: the script to run under the name `scenario_name` (default: that scenario of
+    rollout.scenarios); recorded in the file's attrs["script"] (pimann.rollouts.script_json).
+    """
+    from pimann.rollouts import SCRIPT_ATTR, script_json
     from pimann.train import load_model
 
     params = params or load_params(params_path)
-    scenario = scenario_of(params.rollout, scenario_name, params_path)
+    if segments is None:
+        scenario = scenario_of(params.rollout, scenario_name, params_path)
+    else:
+        scenario = list(segments)
     model, layout, stats, meta = load_model(model_dir)
     attrs = {"scenario": scenario_name, "model_dir": str(model_dir)}
+    attrs[SCRIPT_ATTR] = script_json(scenario)
     for key in ("pi_weight", "seed", "variant"):
         if meta.get(key) is not None:
             attrs[key] = meta[key]

@@ -179,6 +179,8 @@ class RolloutParams:
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     scenarios: dict[str, list[MotionSegment | StandSegment]]
     scenario_names: list[str]  # the scenarios the DVC rollout stage generates
+    # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)
+    benchmark_clips: bool
 
 
 @dataclasses.dataclass(frozen=True)

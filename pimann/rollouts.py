@@ -6,9 +6,14 @@ One file per run, simple to list and to rerun:
     results/rollouts/<model>/models.json      the trained models' meta (pi_weight, variant, ...)
 
 `<model>` is the training output's folder name (`w10`, `baseline`); `baseline` is the
-ADHERENT-style model (ground-projected features, no physics term). The helpers at the end name
-the models of a table keyed like the layout (model, pi_weight, seed, scenario, steering), as
-the evaluation's metrics.csv is.
+ADHERENT-style model (ground-projected features, no physics term). `<scenario>` is a named
+scenario of `rollout.scenario_names` or, with `rollout.benchmark_clips`, `clip_<clip name>`: the
+command-following benchmark's script of one test clip of the features stage's split
+(`benchmark_scripts`, pimann.command_following.clip_commands). Every rollout records the script
+it ran in its attrs["script"] (JSON, `script_json`; `read_script` reads it back).
+
+The helpers at the end name the models of a table keyed like the layout (model, pi_weight,
+seed, scenario, steering), as the evaluation's metrics.csv is.
 
 This module sits beside the generator: the simulation, the CLI and the evaluation import the
 layout from here; it imports nothing of the evaluation.
@@ -18,20 +23,29 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pimann.atomic import atomic_path
 from pimann.errors import PimannError
 from pimann.parallel import pool_map
-from pimann.params import Params
+from pimann.params import MotionSegment, Params, StandSegment
+from pimann.paths import REPO_ROOT
 
 if TYPE_CHECKING:
     import pandas as pd
 
+    from pimann.trajectory import Trajectory
+
 BASELINE = "baseline"
 MODELS_FILE = "models.json"
 STEERING_LABEL = {True: "steering", False: "nosteering"}
+CLIP_PREFIX = "clip_"  # the benchmark scripts' scenario names: clip_<clip name>
+SCRIPT_ATTR = "script"  # a rollout's attrs: the script it ran, as JSON
+
+Segment = MotionSegment | StandSegment
 
 
 @dataclasses.dataclass(frozen=True, order=True)
@@ -80,6 +94,86 @@ def scenario_names(rollout_params: Any) -> list[str]:
     return [s if isinstance(s, str) else s.name for s in scenarios]
 
 
+# ----------------------------------------------------------------------------- scripts
+
+
+def script_json(script: Sequence[Segment]) -> str:
+    """A command script as JSON: [{duration, vx, vy, yaw_rate} | {duration, stand: true}]."""
+    return json.dumps([dataclasses.asdict(segment) for segment in script])
+
+
+def script_of_json(text: str, source: Any = None) -> list[Segment]:
+    """The inverse of `script_json`."""
+    try:
+        items = json.loads(text)
+        script: list[Segment] = [
+            StandSegment(float(d["duration"]), True)
+            if d.get("stand")
+            else MotionSegment(
+                float(d["duration"]), float(d["vx"]), float(d["vy"]), float(d["yaw_rate"])
+            )
+            for d in items
+        ]
+    except (ValueError, TypeError, KeyError, AttributeError) as error:
+        raise PimannError(source, f"not a command script ({error!r})") from None
+    if not script:
+        raise PimannError(source, "the command script has no segments")
+    return script
+
+
+def read_script(trajectory: Trajectory, params: Params | None = None) -> list[Segment]:
+    """The script a rollout ran (its attrs); for a file written before the attribute, the
+    named scenario's of `params` (a PimannError where there is none)."""
+    text = trajectory.attrs.get(SCRIPT_ATTR)
+    if text is not None:
+        return script_of_json(str(text), trajectory.source)
+    scenario = trajectory.attrs.get("scenario")
+    if params is not None and scenario in params.rollout.scenarios:
+        return list(params.rollout.scenarios[scenario])
+    raise PimannError(trajectory.source, "records no command script (attrs['script'])")
+
+
+def is_clip(scenario: str) -> bool:
+    """A benchmark script of a test clip, not a named scenario."""
+    return scenario.startswith(CLIP_PREFIX)
+
+
+def clip_scenario(clip: str) -> str:
+    """The scenario name (a file stem) of a clip's benchmark script: clip_<clip name>."""
+    return CLIP_PREFIX + re.sub(r"[^A-Za-z0-9_.-]", "_", clip)
+
+
+def held_out_clips(collection: str | Path, params: Params) -> list[tuple[str, Trajectory]]:
+    """(name, trajectory) of the clips of a retargeted collection on the test side of the
+    features stage's split (by source clip, mirrors included), in name order."""
+    from pimann.features import split_sources
+    from pimann.trajectory import iter_collection
+
+    sources = [t.source for _, t in iter_collection(collection)]  # a pass for the names only
+    if len(set(sources)) < 2:
+        raise PimannError(collection, "needs at least 2 source clips for the test split")
+    test = split_sources(sources, params.features.test_fraction, params.features.split_seed)
+    return [(name, t) for name, t in iter_collection(collection) if t.source in test]
+
+
+def benchmark_scripts(params: Params) -> dict[str, list[Segment]]:
+    """{clip_<clip name>: script} of the command-following benchmark: each test clip of the
+    features stage's split (collection `features.input`) as the commands of its own base
+    motion (pimann.command_following.clip_commands)."""
+    from pimann.command_following import clip_commands
+
+    scripts: dict[str, list[Segment]] = {}
+    for name, trajectory in held_out_clips(REPO_ROOT / params.features.input, params):
+        scenario = clip_scenario(name)
+        if scenario in scripts:
+            raise PimannError(params.features.input, f"two test clips are named {scenario!r}")
+        scripts[scenario] = clip_commands(trajectory)
+    return scripts
+
+
+# ----------------------------------------------------------------------------- running
+
+
 def model_seeds(models_dir: str | Path) -> dict[int, Path]:
     """{seed: folder} of the trained models in a training output (`<seed>/meta.json`)."""
     models_dir = Path(models_dir)
@@ -106,30 +200,45 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
     return record
 
 
-def _generate(job: tuple[Path, str, Path, bool, Params]) -> Path:
+def _generate(job: tuple[Path, str, Path, bool, Params, list[Segment]]) -> Path:
     import torch
 
     from pimann.generate import generate_file
 
     torch.set_num_threads(1)  # one process per core
-    model_dir, scenario, output, steering, params = job
-    generate_file(model_dir, scenario, output, steering, params)
+    model_dir, scenario, output, steering, params, script = job
+    generate_file(model_dir, scenario, output, steering, params, segments=script)
     return output
+
+
+def rollout_scripts(params: Params) -> dict[str, list[Segment]]:
+    """{scenario: script} the rollout stage runs: the named scenarios of
+    `rollout.scenario_names`, then (`rollout.benchmark_clips`) the test clips' scripts."""
+    names = scenario_names(params.rollout)
+    unknown = [name for name in names if name not in params.rollout.scenarios]
+    if unknown:
+        raise PimannError("params.yaml", f"rollout.scenario_names: unknown scenario {unknown[0]!r}")
+    scripts = {name: list(params.rollout.scenarios[name]) for name in names}
+    if params.rollout.benchmark_clips:
+        clips = benchmark_scripts(params)
+        clash = sorted(set(clips) & set(scripts))
+        if clash:
+            raise PimannError("params.yaml", f"scenario {clash[0]!r} is also a clip's script name")
+        scripts.update(clips)
+    return scripts
 
 
 def run_rollouts(
     models_dir: str | Path, out_dir: str | Path, params: Params, workers: int = 2
 ) -> list[Path]:
-    """Every seed of one training output x every scenario, with and without steering.
+    """Every seed of one training output x every script of `rollout_scripts` (the named
+    scenarios and the benchmark clips), with and without steering.
 
     Written into `out_dir` (= results/rollouts/<model>) as a whole, atomically.
     """
     models_dir, out_dir = Path(models_dir), Path(out_dir)
     seeds = model_seeds(models_dir)
-    scenarios = scenario_names(params.rollout)
-    unknown = [name for name in scenarios if name not in params.rollout.scenarios]
-    if unknown:
-        raise PimannError("params.yaml", f"rollout.scenario_names: unknown scenario {unknown[0]!r}")
+    scripts = rollout_scripts(params)
     record = {
         "profile": params.profile,
         "models_dir": models_dir.name,
@@ -137,9 +246,10 @@ def run_rollouts(
     }
     with atomic_path(out_dir) as tmp:
         jobs = [
-            (folder, sc, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)), st, params)
+            (folder, sc, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)), st, params,
+             script)
             for seed, folder in seeds.items()
-            for sc in scenarios
+            for sc, script in scripts.items()
             for st in (False, True)
         ]  # fmt: skip
         tmp.mkdir()

@@ -1,6 +1,7 @@
 """DVC stage `evaluate`: results/rollouts -> results/metrics.csv, metrics_summary.json,
 timeseries/*.csv and claims.md (pimann.evaluate, pimann.claims), with the retargeted data's own
-sliding level (pimann.data_reference) beside."""
+sliding level (pimann.data_reference) beside, and command_following.csv, .md and .png
+(pimann.following)."""
 
 from __future__ import annotations
 

@@ -2,7 +2,8 @@
 
     python stages/rollout.py --models models/w10 --out results/rollouts/w10 [--workers 2]
 
-rolls out every seed of the training output in every scenario of `rollout.scenario_names`,
+rolls out every seed of the training output in every scenario of `rollout.scenario_names`
+and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>),
 with and without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
 the models' meta in <out>/models.json (layout: pimann.rollouts).
 """

@@ -11,7 +11,7 @@ import pandas as pd
 import pytest
 import torch
 from test_claims import REFERENCE, crafted_metrics
-from test_data_reference import walking_clip
+from test_rollouts import benchmark_collection
 
 from pimann.claims import claims_markdown
 from pimann.errors import PimannError
@@ -25,8 +25,8 @@ from pimann.evaluate import (
 )
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
-from pimann.rollouts import BASELINE, run_rollouts
-from pimann.trajectory import read_trajectory, write_collection
+from pimann.rollouts import BASELINE, read_script, run_rollouts, select_rows
+from pimann.trajectory import read_trajectory
 
 
 @pytest.fixture(scope="module")
@@ -103,12 +103,17 @@ def _tiny_models(root, weight: float, variant: str, seeds):
 def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     from pimann.params import MotionSegment
 
+    # the data's level: one clip at 0.5 m/s (5 s of forward walking), one standing; the test
+    # clips (benchmark scripts): a 2 s walk at 0.4 m/s and its 'mirror'
+    data = benchmark_collection(tmp_path / "walking.h5")
     short = dataclasses.replace(
         params,
+        features=dataclasses.replace(params.features, input=str(data), split_seed=0),
         rollout=dataclasses.replace(
             params.rollout,
             scenarios={"short": [MotionSegment(0.6, 0.5, 0.0, 0.0)]},
             scenario_names=["short"],
+            benchmark_clips=True,
         ),
         figures=dataclasses.replace(params.figures, scenario="short"),
     )
@@ -117,18 +122,21 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     rollouts = tmp_path / "rollouts"
     for name in ("w10", "baseline"):
         written = run_rollouts(tmp_path / "models" / name, rollouts / name, short, workers=1)
-        assert len(written) == 2 * (2 if name == "w10" else 1)
+        assert len(written) == 2 * 3 * (2 if name == "w10" else 1)  # (short + 2 clips) x steering
     first = read_trajectory(rollouts / "w10" / "1" / "short-steering.h5")
     assert first.attrs["seed"] == 1 and first.attrs["pi_weight"] == 10.0
+    assert read_script(first) == short.rollout.scenarios["short"]
+    clip = read_trajectory(rollouts / "baseline" / "0" / "clip_c_mirror-nosteering.h5")
+    script = read_script(clip)
+    assert clip.attrs["scenario"] == "clip_c_mirror" and len(clip) == 100
+    assert script[0].vx == pytest.approx(0.4, abs=0.01)
 
     results = tmp_path / "results"
-    data = tmp_path / "walking.h5"  # the data's level: one clip at 0.5 m/s, one standing
-    write_collection(data, [("a", walking_clip(0.5, 300, "a")), ("b", walking_clip(0.0, 300, "b"))])
     claims = evaluate_all(rollouts, results, short, workers=1, data=data)
     frame = read_metrics(results / "metrics.csv")
-    assert len(frame) == 6 and set(frame["model"]) == {"w10", BASELINE}
+    assert len(frame) == 18 and set(frame["model"]) == {"w10", BASELINE}
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
-    row = frame[(frame["model"] == "w10") & (frame["seed"] == 1) & frame["steering"]].iloc[0]
+    row = select_rows(frame, "short", True, model="w10", seed=1).iloc[0]
     expected = trajectory_metrics(first, params=short.evaluate)
     assert row["support_rmse_linear_total"] == pytest.approx(
         expected["support_rmse_linear_total"], rel=1e-5
@@ -139,6 +147,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     base = pd.read_csv(results / "timeseries" / "base_pi.csv")
     assert list(base.columns)[:4] == ["time", "base_x", "base_y", "base_z"] and len(base) == 31
     summary = json.loads((results / "metrics_summary.json").read_text())
+    assert list(summary["summary"]) == ["short"]  # the clips' rollouts: metrics.csv only
     assert summary["provenance"]["clips"] == 3 and summary["provenance"]["epochs"] == 3
     assert summary["timeseries"]["base_pi"]["model"] == "w10"
     reference = summary["data_reference"]
@@ -147,6 +156,19 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert linear == pytest.approx(500 * 0.5 / np.sqrt(3), rel=1e-6)
     assert "| D | data (retargeted, forward walking)" in (results / "claims.md").read_text()
     assert {c.id for c in claims} >= {"C1", "C2", "C14"}
+
+    following = pd.read_csv(results / "command_following.csv")
+    assert len(following) == 18 + 2  # one segment per rollout, and the two test clips' own
+    data_rows = following[following["model"] == "data"]
+    assert set(data_rows["scenario"]) == {"clip_c", "clip_c_mirror"}
+    assert not data_rows["steering"].any() and set(data_rows["seed"]) == {0}
+    assert data_rows["speed_ratio"].to_numpy() == pytest.approx(1.0, abs=0.02)
+    assert set(following["kind"]) == {"scenario", "clip"}
+    assert set(following.loc[following["scenario"] == "short", "kind"]) == {"scenario"}
+    text = (results / "command_following.md").read_text()
+    assert "Profile **" in text and "| data | nosteering | forward |" in text
+    assert "## Named scenarios" in text and "| w10 (w=10) | steering | short |" in text
+    assert (results / "command_following.png").read_bytes()[:4] == b"\x89PNG"
 
 
 def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):

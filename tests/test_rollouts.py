@@ -4,25 +4,36 @@ sits beside the generator, apart from the evaluation."""
 from __future__ import annotations
 
 import ast
+import dataclasses
 import subprocess
 import sys
 from pathlib import Path
 
 import pandas as pd
 import pytest
+from test_data_reference import walking_clip
 
+from pimann.command_following import clip_commands
 from pimann.errors import PimannError
+from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
 from pimann.rollouts import (
     BASELINE,
     RolloutKey,
+    benchmark_scripts,
+    clip_scenario,
     find_rollouts,
     parse_rollout_path,
     pi_models,
+    read_script,
     rollout_path,
+    rollout_scripts,
+    script_json,
+    script_of_json,
     select_rows,
     weight_label,
 )
+from pimann.trajectory import write_collection
 
 EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
 
@@ -49,6 +60,59 @@ def test_table_models_and_rows():
     assert pi_models(frame) == {1.0: "w1", 10.0: "w10"}
     assert weight_label(10.0) == "10" and weight_label(0.5) == "0.5"
     assert list(select_rows(frame, "forward", False, model="w10").index) == [1]
+
+
+def benchmark_collection(path):
+    """Sources a, b, c: features.split_seed 0 holds out c (a short walk and its 'mirror')."""
+    write_collection(
+        path,
+        [
+            ("a", walking_clip(0.5, 300, "a")),
+            ("b", walking_clip(0.0, 100, "b")),
+            ("c", walking_clip(0.4, 100, "c")),
+            ("c mirror", walking_clip(0.4, 100, "c")),
+        ],
+    )
+    return path
+
+
+def test_benchmark_scripts_of_the_test_clips_only(tmp_path):
+    params = load_params()
+    collection = benchmark_collection(tmp_path / "walking.h5")
+    params = dataclasses.replace(
+        params,
+        features=dataclasses.replace(params.features, input=str(collection), split_seed=0),
+    )
+    scripts = benchmark_scripts(params)
+    assert list(scripts) == ["clip_c", "clip_c_mirror"]  # a file stem: the space replaced
+    expected = clip_commands(walking_clip(0.4, 100, "c"))
+    assert scripts["clip_c"] == scripts["clip_c_mirror"] == expected
+    assert isinstance(expected[0], MotionSegment) and expected[0].vx == pytest.approx(0.4, abs=0.01)
+    assert sum(s.duration for s in expected) == pytest.approx(99 / 50)
+    key = RolloutKey("w10", 0, clip_scenario("dataset-1_walk-back x"), False)
+    assert parse_rollout_path(tmp_path, rollout_path(tmp_path, key)) == key
+
+    named = rollout_scripts(params)
+    assert list(named) == [*params.rollout.scenario_names, "clip_c", "clip_c_mirror"]
+    only = dataclasses.replace(
+        params, rollout=dataclasses.replace(params.rollout, benchmark_clips=False)
+    )
+    assert list(rollout_scripts(only)) == params.rollout.scenario_names
+
+
+def test_scripts_round_trip_through_json():
+    script = [StandSegment(1.0, True), MotionSegment(2.5, 0.8, -0.1, 0.3)]
+    text = script_json(script)
+    assert '"stand": true' in text and script_of_json(text) == script
+    with pytest.raises(PimannError, match="not a command script"):
+        script_of_json('[{"duration": 1.0}]', "x.h5")
+    trajectory = walking_clip(0.0, 10, "s")
+    trajectory.attrs["scenario"] = "forward"
+    assert read_script(trajectory, load_params()) == load_params().rollout.scenarios["forward"]
+    with pytest.raises(PimannError, match="records no command script"):
+        read_script(trajectory)
+    trajectory.attrs["script"] = text
+    assert read_script(trajectory) == script
 
 
 def test_rollouts_import_nothing_of_the_evaluation():
