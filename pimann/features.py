@@ -37,6 +37,7 @@ from pimann.errors import PimannError
 from pimann.params import FeaturesParams
 from pimann.robot import N_JOINTS
 from pimann.rotations import yaw_only
+from pimann.standing import data_standing
 from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -306,6 +307,8 @@ class FeatureDataset:
     # detection), for `train.pi_support: data_contacts`; None when a clip has no contacts
     train_contacts: np.ndarray | None = None
     test_contacts: np.ndarray | None = None
+    # the training clips' standing pose (pimann.standing), JSON; None: not recorded
+    standing: dict | None = None
 
     @property
     def train_clips(self) -> list[str]:
@@ -359,6 +362,8 @@ def build_dataset(
             params.input, f"empty split: {len(x_train)} train, {len(x_test)} test samples"
         )
     stats = Normalisation.fit(x_train, y_train)
+    standing = data_standing(t for _, t in clips if t.source not in test_sources)
+    log.info("standing pose (%s): generation starts from it", standing.origin)
     return FeatureDataset(
         x_train=stats.normalise_x(x_train).astype(np.float32),
         y_train=stats.normalise_y(y_train).astype(np.float32),
@@ -372,6 +377,7 @@ def build_dataset(
         test_origin=test_origin,
         train_contacts=train_contacts,
         test_contacts=test_contacts,
+        standing=standing.to_json(),
     )
 
 
@@ -407,6 +413,8 @@ def write_dataset(path: str | Path, dataset: FeatureDataset) -> None:
         file.attrs["sources"] = dataset.sources
         file.attrs["train_clips"] = dataset.train_clips
         file.attrs["test_clips"] = dataset.test_clips
+        if dataset.standing is not None:
+            file.attrs["standing"] = json.dumps(dataset.standing)
 
 
 def read_dataset(path: str | Path) -> FeatureDataset:
@@ -434,4 +442,5 @@ def read_dataset(path: str | Path) -> FeatureDataset:
             test_origin=file["test_origin"][()],
             train_contacts=file["train_contacts"][()] if "train_contacts" in file else None,
             test_contacts=file["test_contacts"][()] if "test_contacts" in file else None,
+            standing=json.loads(file.attrs["standing"]) if "standing" in file.attrs else None,
         )

@@ -70,14 +70,13 @@ from pimann.params import (
     load_params,
 )
 from pimann.robot import (
+    N_JOINTS,
     SOLE_CORNERS,
-    STANDING_BASE_HEIGHT,
-    STANDING_BASE_QUATERNION_XYZW,
-    STANDING_JOINTS,
     Robot,
     load_robot,
 )
 from pimann.rotations import yaw_of, yaw_only
+from pimann.standing import StandingPose
 from pimann.steering import goal_from_command, rotation_rpy, steer
 from pimann.trajectory import Trajectory, write_trajectory
 
@@ -146,7 +145,7 @@ class _Odometry:
         self.model = robot.model
         self.data = robot.model.createData()  # private: the cached Robot's data may be in use
         self.frame_ids = [robot.frame_id(name) for name in FEET]
-        self.q = robot.configuration(np.zeros(3), [0.0, 0.0, 0.0, 1.0], STANDING_JOINTS)
+        self.q = robot.configuration(np.zeros(3), [0.0, 0.0, 0.0, 1.0], np.zeros(N_JOINTS))
         self.corners_h = np.hstack([SOLE_CORNERS, np.ones((len(SOLE_CORNERS), 1))]).T
         self.support: tuple[int, int] | None = None
         self.anchor = np.zeros(3)
@@ -224,8 +223,10 @@ class _Generator:
         steering: bool,
         robot: Robot,
         contact_params: EvaluateParams,
+        standing: StandingPose,
     ):
         self.params, self.steering, self.network = params, steering, _Network(model, layout, stats)
+        self.standing_joints = standing.joints.copy()
         self.dt = 1.0 / float(layout.rate_hz)
         self.projected = layout.variant == "ground_projected"
         self.layout, self.xs, self.ys = layout, layout.x_slices, layout.y_slices
@@ -240,17 +241,18 @@ class _Generator:
         span = max(out_offsets.max(), 1.0)
         self.weights = (np.clip(out_offsets / span, 0, 1) ** params.command_blend_tau)[:, None]
         self.weights[out_offsets <= 0] = 0.0
-        rpy = matrix_to_rpy(Rotation.from_quat(STANDING_BASE_QUATERNION_XYZW).as_matrix()[None])
-        self.standing_rpy = rpy[0] * ([0.0, 0.0, 1.0] if self.projected else 1.0)
+        rpy = np.array([*standing.roll_pitch, 0.0])
+        self.standing_rpy = rpy * ([0.0, 0.0, 1.0] if self.projected else 1.0)
 
         # the robot: standing still
         self.rotation = rotation_rpy(*self.standing_rpy)
-        self.joints, self.joint_velocities = STANDING_JOINTS.copy(), np.zeros(len(STANDING_JOINTS))
+        self.joints, self.joint_velocities = standing.joints.copy(), np.zeros(len(standing.joints))
         self.yaw = float(self.standing_rpy[2])  # unwrapped
         self.odometry = _Odometry(robot)
+        lowest = (self.odometry.corners_in_base(self.joints) @ self.rotation.T)[..., 2].min()
         self.position, _, self.foot = self.odometry.place(
-            self.rotation, self.joints, first=np.array([0.0, 0.0, STANDING_BASE_HEIGHT])
-        )
+            self.rotation, self.joints, first=np.array([0.0, 0.0, -lowest])
+        )  # the lowest sole corner on the floor
         self.trigger = SchmittTrigger.from_params(contact_params, self.dt, np.array([True, True]))
         self.contacts = self.trigger.state
         # the network's side: velocity history (world frame) and corrected future (base frame)
@@ -331,9 +333,9 @@ class _Generator:
         blend = max(self.params.stop_blend_s, self.dt)
         alpha = min(1.0, (k - self.stop_step + 1) * self.dt / blend)
         from_joints, from_rotation = self.stop_from
-        joints = (1 - alpha) * from_joints + alpha * STANDING_JOINTS
+        joints = (1 - alpha) * from_joints + alpha * self.standing_joints
         if alpha >= 1.0:
-            joints = STANDING_JOINTS.copy()
+            joints = self.standing_joints.copy()
         roll_pitch = (1 - alpha) * matrix_to_rpy(from_rotation[None])[0, :2]
         roll_pitch += alpha * self.standing_rpy[:2]
         self.joint_velocities = (joints - self.joints) / self.dt
@@ -408,20 +410,24 @@ def generate_rollout(
     contact_params: EvaluateParams | None = None,
     source: str = "generated",
     attrs: dict | None = None,
+    standing: StandingPose | None = None,
 ) -> Rollout:
-    """Roll the network out over `scenario`; see the module docstring for every rule."""
+    """Roll the network out over `scenario`; see the module docstring for every rule.
+
+    `standing`: the pose to start from and return to (default: the robot's nominal one).
+    """
     step_segment = scenario_steps(scenario, float(layout.rate_hz))
     commands = [Command.of(segment) for segment in scenario]
     generator = _Generator(
         model, layout, stats, params, steering, robot or load_robot(),
-        contact_params or load_params().evaluate,
+        contact_params or load_params().evaluate, standing or StandingPose.nominal(),
     )  # fmt: skip
     n = len(step_segment) + 1
     out = {
         "position": np.empty((n, 3)),
         "rotation": np.empty((n, 3, 3)),
-        "joints": np.empty((n, len(STANDING_JOINTS))),
-        "joint_velocities": np.empty((n, len(STANDING_JOINTS))),
+        "joints": np.empty((n, N_JOINTS)),
+        "joint_velocities": np.empty((n, N_JOINTS)),
         "contacts": np.empty((n, 2), dtype=bool),
         "goal": np.empty((n, 3)),
         "stopped": np.empty(n, dtype=bool),
@@ -503,9 +509,14 @@ def generate_file(
     for key in ("pi_weight", "seed", "variant"):
         if meta.get(key) is not None:
             attrs[key] = meta[key]
+    standing = StandingPose.nominal()
+    if params.rollout.start_pose == "data":
+        standing = StandingPose.from_json(meta.get("standing"))
+    attrs["start_pose"] = standing.origin
     trajectory = generate(
         model, layout, stats, scenario, params.rollout, steering, load_robot(),
         contact_params=params.evaluate, source=f"{model_dir}:{scenario_name}", attrs=attrs,
+        standing=standing,
     )  # fmt: skip
     write_trajectory(output_path, trajectory)
     log.info("wrote %s (%d frames, steering %s)", output_path, len(trajectory), steering)

@@ -177,6 +177,7 @@ class RolloutParams:
     held_command: Literal["progress", "carrot"]  # how the goal moves while a command holds
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
+    start_pose: Literal["data", "robot"]  # standing pose of a start and a stop (standing.py)
     scenarios: dict[str, list[MotionSegment | StandSegment]]
     scenario_names: list[str]  # the scenarios the DVC rollout stage generates
     # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)

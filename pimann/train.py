@@ -285,7 +285,7 @@ def _train(
                 "best_epoch": member["best_epoch"], "best_test_loss": member["best_loss"],
                 "epochs": config.epochs, "train_samples": n, "test_samples": len(data.x_test),
                 "dataset": str(dataset_path), "train_clips": data.train_clips,
-                "test_clips": data.test_clips,
+                "test_clips": data.test_clips, "standing": data.standing,
                 "params": {"model": as_dict(params.model), "train": as_dict(config)},
             }  # fmt: skip
             model = MANN(data.layout.input_dim, data.layout.output_dim, params.model, seeds=[seed])

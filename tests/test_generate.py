@@ -393,3 +393,26 @@ def test_ground_projected_baseline_keeps_yaw_only(robot, params):
     np.testing.assert_allclose(quaternions[:, :2], 0.0, atol=1e-12)  # rotations about z only
     yaw = 2 * np.arctan2(quaternions[:, 2], quaternions[:, 3])
     assert 0.3 < yaw[-1] < 0.7  # turned at about the commanded 0.3 rad/s for 2 s
+
+
+def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
+    from pimann.standing import StandingPose
+
+    nominal = StandingPose.nominal()
+    joints = nominal.joints.copy()
+    joints[JOINT_NAMES.index("l_shoulder_yaw")] += 0.5  # as the data's people stand
+    joints[JOINT_NAMES.index("r_knee")] -= 0.1
+    standing = StandingPose(joints, np.array([0.0, 0.05]), "test")
+    scenario = [StandSegment(0.2, True), MotionSegment(1.0, 0.4, 0.0, 0.0), StandSegment(1.0, True)]
+    rollout = generate_rollout(
+        GaitModel(robot), LAYOUT, IDENTITY, scenario, params.rollout, False, robot,
+        contact_params=params.evaluate, standing=standing,
+    )  # fmt: skip
+    trajectory = rollout.trajectory
+    np.testing.assert_array_equal(trajectory.joint_positions[0], joints)
+    np.testing.assert_array_equal(trajectory.joint_positions[-1], joints)  # stopped: back in it
+    rpy = matrix_to_rpy(Rotation.from_quat(trajectory.base_quaternion_xyzw[[0, -1]]).as_matrix())
+    np.testing.assert_allclose(rpy[:, :2], [[0.0, 0.05], [0.0, 0.05]], atol=1e-9)
+    # the lowest sole corner on the floor from the first frame (independent FK)
+    heights = foot_kinematics(robot, trajectory_configurations(robot, trajectory)).heights
+    assert abs(heights[0].min()) < 1e-9
