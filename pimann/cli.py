@@ -15,6 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from pimann.errors import PimannError
+from pimann.logs import quiet_third_party
 
 EXIT_BAD_INPUT = 2
 SKELETON_HELP = "BVH skeleton: a key of params data.skeletons (default: auto, recognised)"
@@ -173,6 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
     )
+    quiet_third_party()
     try:
         args.handler(args)
     except PimannError as error:

@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 from pimann.data_report import data_report, report_table, write_report
+from pimann.logs import quiet_third_party
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -21,6 +22,7 @@ log = logging.getLogger("data_report")
 
 @stage_entry
 def main(argv: list[str] | None = None) -> None:
+    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--collection", type=Path, default=None, help="default: features.input")
     parser.add_argument("--out", type=Path, default=Path("results/data_report"))

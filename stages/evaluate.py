@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 from pimann.evaluate import evaluate_all
+from pimann.logs import quiet_third_party
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -22,6 +23,7 @@ log = logging.getLogger("evaluate")
 
 @stage_entry
 def main(argv: list[str] | None = None) -> None:
+    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--results", type=Path, default=Path("results"))

@@ -9,6 +9,7 @@ import time
 from pathlib import Path
 
 from pimann.figures import make_figures
+from pimann.logs import quiet_third_party
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry
@@ -18,6 +19,7 @@ log = logging.getLogger("figures")
 
 @stage_entry
 def main(argv: list[str] | None = None) -> None:
+    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--out", type=Path, default=Path("paper_figures"))

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 import pimann.sim  # noqa: F401 -- picks MuJoCo's headless GL backend before mujoco loads
+from pimann.logs import quiet_third_party
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.sim.runs import simulate_runs
@@ -27,6 +28,7 @@ log = logging.getLogger("simulate")
 
 @stage_entry
 def main(argv: list[str] | None = None) -> None:
+    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--out", type=Path, default=Path("results/sim"))
