@@ -2,39 +2,48 @@
 
 One function per figure, each returning a matplotlib Figure (None when its data is missing;
 pyplot-free, so no global state or GUI backend);
-`make_figures` saves them as PDF and PNG. One style for all (`STYLE`, single IEEE column:
-3.5 in wide, 8 pt), one colour per PI weight everywhere (`weight_colours`). Every file records
-its provenance (profile, epochs, clips) in its metadata, and a figure made from anything but
-the `paper` profile says so in a small footer.
+`make_figures` saves them as PDF and PNG. One style for all (pimann.figure_style: single IEEE
+column, 3.5 in wide, 8 pt), one colour per PI weight everywhere (`weight_colours`), legends
+above the axes (never over the data). Every file records its provenance (profile, epochs,
+clips) in its metadata, and a figure made from anything but the `paper` profile says so in a
+small footer.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import json
 import logging
 from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import h5py
 import matplotlib
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
+from matplotlib.patches import Patch
 
-from pimann.atomic import atomic_path
-from pimann.errors import PimannError
-from pimann.evaluate import read_metrics
+from pimann.figure_style import (
+    BASELINE_COLOUR,
+    DATA_COLOUR,
+    FORMATS,
+    Results,
+    load_results,
+    new_figure,
+    save_figure,
+    style,
+    weight_colours,
+)
 from pimann.params import FiguresParams
 from pimann.robot import JOINT_NAMES
 from pimann.rollouts import BASELINE, pi_models, weight_label
 
-log = logging.getLogger(__name__)
+__all__ = [
+    "BASELINE", "BASELINE_COLOUR", "DATA_COLOUR", "FIGURES", "FORMATS", "Results",
+    "load_results", "make_figures", "save_figure", "style", "weight_colours", "weight_label",
+]  # fmt: skip
 
-FORMATS = ("pdf", "png")
-BASELINE_COLOUR = "0.45"
-DATA_COLOUR = "tab:green"  # the retargeted data's own level
+log = logging.getLogger(__name__)
 CONDITIONS = {  # drift figures: (title, colour, line style)
     "base_baseline": ("Baseline", BASELINE_COLOUR, "-"),
     "base_pi": ("PI, no steering", "tab:red", "--"),
@@ -42,103 +51,15 @@ CONDITIONS = {  # drift figures: (title, colour, line style)
 }
 AXIS_COLOURS = ("tab:blue", "tab:orange", "tab:green")  # x y z / roll pitch yaw
 SIDE_COLOURS = {"left": "tab:blue", "right": "tab:orange"}
+CONTACT_ALPHA = 0.15  # the contact shading of the foot-height figure (both feet: mixed)
+# joint tracking: (trace, colour, line style, width, zorder); the reference dashed over the
+# measured (wide, light) so both show where they coincide, the generated dotted
+JOINT_TRACES = (
+    ("measured", "tab:orange", "-", 2.0, 2),
+    ("generated", "0.45", ":", 0.9, 3),
+    ("reference", "tab:blue", "--", 0.8, 4),
+)
 TRACKED_JOINTS = ("torso_yaw", "neck_yaw", "l_shoulder_pitch", "r_elbow")
-
-
-def style(figures: FiguresParams) -> dict[str, Any]:
-    """The one rc of every figure: legible at a single column's width."""
-    size = figures.font_pt
-    return {
-        "font.size": size,
-        "axes.titlesize": size,
-        "axes.labelsize": size,
-        "legend.fontsize": size - 1,
-        "xtick.labelsize": size - 1,
-        "ytick.labelsize": size - 1,
-        "axes.linewidth": 0.6,
-        "lines.linewidth": 1.0,
-        "grid.linewidth": 0.4,
-        "grid.alpha": 0.5,
-        "axes.grid": True,
-        "axes.spines.top": False,
-        "axes.spines.right": False,
-        "legend.frameon": False,
-        "legend.handlelength": 1.5,
-        "figure.dpi": 100,
-        "savefig.dpi": figures.dpi,
-        "pdf.fonttype": 42,  # TrueType: editable text in the PDF
-        "svg.hashsalt": "pimann",
-    }
-
-
-def weight_colours(weights) -> dict[float, tuple]:
-    """The same colour for the same w in every figure (viridis by rank, light end cut)."""
-    ordered = sorted({float(w) for w in weights})
-    cmap = matplotlib.colormaps["viridis"]
-    positions = np.linspace(0.0, 0.85, max(len(ordered), 2))
-    return {w: cmap(p) for w, p in zip(ordered, positions, strict=False)}
-
-
-@dataclasses.dataclass
-class Results:
-    """What the figures read: the evaluate stage's outputs (and the simulate stage's, if any)."""
-
-    root: Path
-    metrics: pd.DataFrame
-    summary: dict[str, Any]
-    timeseries: dict[str, pd.DataFrame]
-
-    @property
-    def provenance(self) -> dict[str, Any]:
-        return self.summary.get("provenance", {})
-
-    @property
-    def weights(self) -> list[float]:
-        """Every PI weight of the study (for colours), from the provenance or the data."""
-        listed = self.provenance.get("pi_weights") or []
-        return sorted({float(w) for w in listed} | set(pi_models(self.metrics)))
-
-    def data_level(self, metric: str) -> float | None:
-        """The retargeted data's own level of a sliding metric (median over all clips)."""
-        subset = self.summary.get("data_reference", {}).get("all") or {}
-        return (subset.get("metrics", {}).get(metric) or {}).get("median")
-
-    def model_weight(self, series: str) -> float | None:
-        """The PI weight of the rollout a time series came from."""
-        model = self.summary.get("timeseries", {}).get(series, {}).get("model")
-        rows = self.metrics[self.metrics["model"] == model]
-        return float(rows["pi_weight"].iloc[0]) if len(rows) else None
-
-
-def load_results(results_dir: str | Path) -> Results:
-    root = Path(results_dir)
-    summary_path = root / "metrics_summary.json"
-    try:
-        summary = json.loads(summary_path.read_text())
-    except FileNotFoundError:
-        raise PimannError(summary_path, "file not found (run `dvc repro evaluate`)") from None
-    except json.JSONDecodeError as error:
-        raise PimannError(summary_path, f"not valid JSON ({error})") from None
-    timeseries = {}
-    for path in sorted((root / "timeseries").glob("*.csv")):
-        table = pd.read_csv(path)
-        if "time" not in table:
-            raise PimannError(path, "lacks column 'time'")
-        timeseries[path.stem] = table
-    return Results(root, read_metrics(root / "metrics.csv"), summary, timeseries)
-
-
-def _footer(fig: Figure, provenance: dict[str, Any]) -> None:
-    profile = provenance.get("profile")
-    if profile != "paper":
-        fig.text(
-            0.005, 0.005, f"profile: {profile}", fontsize=5, color="0.4", ha="left", va="bottom"
-        )
-
-
-def _figure(figures: FiguresParams, height: float, rows: int = 1, cols: int = 1, **kwargs):
-    fig = Figure(figsize=(figures.width_in, height), layout="constrained")
-    return fig, fig.subplots(rows, cols, **kwargs)
 
 
 # ----------------------------------------------------------------------------- the figures
@@ -160,7 +81,7 @@ def fig_pi_weight_comparison(results: Results, figures: FiguresParams) -> Figure
         )
         return None
     colours = weight_colours(results.weights)
-    fig, axes = _figure(figures, 2.0, 1, 2)
+    fig, axes = new_figure(figures, 2.2, 1, 2)
     for ax, kind, unit in zip(axes, ("linear", "angular"), ("m/s", "rad/s"), strict=True):
         metric = f"support_rmse_{kind}_total"
         data = [frame.loc[frame["model"] == models[float(w)], metric].dropna() for w in weights]
@@ -185,12 +106,20 @@ def fig_pi_weight_comparison(results: Results, figures: FiguresParams) -> Figure
             ax.axhline(baseline.median(), color=BASELINE_COLOUR, ls="--", lw=1.0, label="baseline")
         if (level := results.data_level(metric)) is not None:
             ax.axhline(level, color=DATA_COLOUR, ls=":", lw=1.0, label="data")
-        if ax.get_legend_handles_labels()[0]:
-            ax.legend(loc="upper right")
         ax.set_xlabel("PI weight $w$")
-        ax.set_title(f"{kind} ({unit})")
+        ax.set_title(f"{kind} ({unit}, summed)")
         ax.set_ylim(bottom=0)
-    axes[0].set_ylabel("support-foot total RMSE")
+    # a sum over the contact frames of each frame's RMS: a number that grows with the frames
+    frames = frame["frames"].median() if "frames" in frame else float("nan")
+    over = f"over {frames:.0f} frames" if np.isfinite(frames) else "over the frames"
+    axes[0].set_ylabel(f"total RMSE: sum of per-frame\nRMS {over}")
+    handles, labels = axes[0].get_legend_handles_labels()
+    handles += [
+        Line2D([], [], color="tab:orange", lw=1.2),
+        Line2D([], [], ls="none", marker="D", color="black", markersize=3),
+    ]
+    labels += ["median (seeds)", "mean"]
+    fig.legend(handles, labels, loc="outside upper center", ncols=len(labels))
     return fig
 
 
@@ -210,7 +139,7 @@ def fig_base_displacement(results: Results, figures: FiguresParams) -> Figure | 
     if not series:
         log.info("base_displacement: no base_*.csv time series")
         return None
-    fig, axes = _figure(figures, 3.0, 2, len(series), sharex=True, sharey="row", squeeze=False)
+    fig, axes = new_figure(figures, 3.0, 2, len(series), sharex=True, sharey="row", squeeze=False)
     for col, (name, table) in enumerate(series.items()):
         top, bottom = axes[0, col], axes[1, col]
         for k, axis in enumerate("xyz"):
@@ -221,8 +150,9 @@ def fig_base_displacement(results: Results, figures: FiguresParams) -> Figure | 
         bottom.set_xlabel("time (s)")
     axes[0, 0].set_ylabel("position (m)")
     axes[1, 0].set_ylabel("orientation (rad)")
-    axes[0, -1].legend(loc="upper left", fontsize="small")
-    axes[1, -1].legend(loc="upper left", fontsize="small")
+    handles = [Line2D([], [], color=c) for c in AXIS_COLOURS]
+    labels = ["$x$ / roll", "$y$ / pitch", "$z$ / yaw"]
+    fig.legend(handles, labels, loc="outside upper center", ncols=3)
     return fig
 
 
@@ -232,7 +162,7 @@ def fig_ground_projection(results: Results, figures: FiguresParams) -> Figure | 
     if not series:
         log.info("ground_projection: no base_*.csv time series")
         return None
-    fig, ax = _figure(figures, 2.2)
+    fig, ax = new_figure(figures, 2.6)
     ax.axhline(0.0, color="black", lw=0.6, ls=":", label="desired direction")
     for name, table in series.items():
         _, colour, line = CONDITIONS[name]
@@ -241,7 +171,7 @@ def fig_ground_projection(results: Results, figures: FiguresParams) -> Figure | 
         ax.plot(table["base_x"].iloc[-1], table["base_y"].iloc[-1], "o", color=colour, ms=2.5)
     ax.set_xlabel("$x$ (m)")
     ax.set_ylabel("$y$ (m)")
-    ax.legend(loc="best")
+    fig.legend(loc="outside upper center", ncols=2)
     return fig
 
 
@@ -262,15 +192,16 @@ def fig_foot_rotations(results: Results, figures: FiguresParams) -> Figure | Non
         log.info("foot_rotations: no feet_w*.csv time series")
         return None
     colours = weight_colours(results.weights)
-    fig, axes = _figure(figures, 2.8, 2, 1, sharex=True, sharey=True)
+    fig, axes = new_figure(figures, 2.8, 2, 1, sharex=True, sharey=True)
     for ax, side in zip(axes, ("left", "right"), strict=True):
         for weight, table in feet.items():
             ax.plot(table["time"], np.degrees(table[f"{side}_sole_pitch"]),
                     color=colours[weight], label=f"$w$={weight:g}", lw=0.8)  # fmt: skip
-        ax.set_ylabel(f"{side} foot pitch (deg)")
+        ax.set_title(f"{side} foot", fontsize="small", pad=2)
+    fig.supylabel("sole pitch (deg)", fontsize=figures.font_pt)
     axes[-1].set_xlabel("time (s)")
-    axes[0].legend(ncols=min(len(feet), 5), loc="lower left", bbox_to_anchor=(0, 1.0),
-                   columnspacing=0.8, handlelength=1.0)  # fmt: skip
+    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center",
+               ncols=min(len(feet), 5), columnspacing=0.8, handlelength=1.0)  # fmt: skip
     return fig
 
 
@@ -281,19 +212,22 @@ def fig_foot_heights(results: Results, figures: FiguresParams) -> Figure | None:
     if not weights:
         log.info("foot_heights: no feet time series for w in %s", figures.foot_height_weights)
         return None
-    fig, axes = _figure(figures, 1.2 + 1.0 * len(weights), len(weights), 1, sharex=True,
+    fig, axes = new_figure(figures, 1.2 + 1.0 * len(weights), len(weights), 1, sharex=True,
                         sharey=True, squeeze=False)  # fmt: skip
     for ax, weight in zip(axes[:, 0], weights, strict=True):
         table = feet[weight]
         for side, colour in SIDE_COLOURS.items():
             ax.plot(table["time"], 100 * table[f"{side}_foot_height"], color=colour, label=side)
             contact = table[f"{side}_contact"].to_numpy(bool)
-            ax.fill_between(table["time"], 0, 1, where=contact, color=colour, alpha=0.12, lw=0,
-                            transform=ax.get_xaxis_transform())  # fmt: skip
-        ax.set_title(f"$w$={weight:g}", fontsize="small")
+            ax.fill_between(table["time"], 0, 1, where=contact, color=colour, alpha=CONTACT_ALPHA,
+                            lw=0, transform=ax.get_xaxis_transform())  # fmt: skip
+        ax.set_title(f"$w$={weight:g}", fontsize="small", pad=2)
         ax.set_ylabel("foot height (cm)")
     axes[-1, 0].set_xlabel("time (s)")
-    axes[0, 0].legend(loc="lower right", bbox_to_anchor=(1.0, 1.0), ncols=2)
+    handles = [Line2D([], [], color=c) for c in SIDE_COLOURS.values()]
+    handles += [Patch(color=c, alpha=CONTACT_ALPHA, lw=0) for c in SIDE_COLOURS.values()]
+    labels = [*SIDE_COLOURS, *(f"{side} in contact" for side in SIDE_COLOURS)]
+    fig.legend(handles, labels, loc="outside upper center", ncols=4, columnspacing=1.0)
     return fig
 
 
@@ -341,20 +275,23 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     )
     names = list(data["names"])
     joints = [j for j in TRACKED_JOINTS if j in names] or names[:4]
-    fig, axes = _figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)
+    fig, axes = new_figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)
     for ax, joint in zip(axes.flat, joints, strict=False):
         k = names.index(joint)
-        for kind, colour, line in (("generated", "0.5", ":"), ("reference", "tab:blue", "--"),
-                                   ("measured", "tab:orange", "-")):  # fmt: skip
+        for kind, colour, line, width, z in JOINT_TRACES:
             if f"joints_{kind}" in data:
                 ax.plot(data["time"], np.degrees(data[f"joints_{kind}"][:, k]), color=colour,
-                        ls=line, label=kind, lw=0.8)  # fmt: skip
-        ax.set_title(joint.replace("_", " "), fontsize="small")
+                        ls=line, label=kind, lw=width, zorder=z,
+                        alpha=0.6 if kind == "measured" else 1.0)  # fmt: skip
+        ax.set_title(joint.replace("_", " "), fontsize="small", pad=2)
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     for ax in axes[:, 0]:
         ax.set_ylabel("angle (deg)")
-    axes[0, 0].legend(loc="best", fontsize="small")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    order = [labels.index(k) for k in ("generated", "reference", "measured") if k in labels]
+    fig.legend([handles[i] for i in order], [labels[i] for i in order],
+               loc="outside lower center", ncols=3)  # below: the title is above  # fmt: skip
     fig.suptitle(f"MuJoCo, offline controller ({path.stem})", fontsize="small")
     return fig
 
@@ -367,34 +304,6 @@ FIGURES: dict[str, Callable[[Results, FiguresParams], Figure | None]] = {
     "foot_heights": fig_foot_heights,
     "joint_tracking": fig_joint_tracking,
 }
-
-
-def save_figure(
-    fig: Figure,
-    out_dir: str | Path,
-    name: str,
-    provenance: dict[str, Any],
-    formats: tuple[str, ...] = FORMATS,
-) -> list[Path]:
-    """`name`.pdf and `name`.png (`formats`), atomically, with the provenance in their metadata."""
-    _footer(fig, provenance)
-    summary = json.dumps(
-        {k: provenance.get(k) for k in ("profile", "epochs", "clips", "seeds", "scenario")},
-        sort_keys=True,
-    )
-    profile = f"profile={provenance.get('profile')}"
-    metadata = {
-        "pdf": {"Title": name, "Subject": f"pimann {summary}", "Keywords": profile,
-                "Creator": "pimann.figures", "CreationDate": None},
-        "png": {"Title": name, "Description": f"pimann {summary}", "Software": "pimann.figures"},
-    }  # fmt: skip
-    paths = []
-    for fmt in formats:
-        target = Path(out_dir) / f"{name}.{fmt}"
-        with atomic_path(target) as tmp:
-            fig.savefig(tmp, format=fmt, metadata=metadata[fmt])
-        paths.append(target)
-    return paths
 
 
 def make_figures(

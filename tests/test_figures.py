@@ -121,7 +121,7 @@ def test_box_plot_shows_the_data_level(params, tmp_path):
         lines = [line for line in ax.get_lines() if line.get_label() == "data"]
         expected = REFERENCE["all"]["metrics"][f"support_rmse_{metric}_total"]["median"]
         assert len(lines) == 1 and lines[0].get_ydata()[0] == pytest.approx(expected)
-        assert "data" in [t.get_text() for t in ax.get_legend().get_texts()]
+    assert "data" in [t.get_text() for t in fig.legends[0].get_texts()]
     results = load_results(crafted_results(tmp_path / "bare", params, data=False))
     fig = FIGURES["pi_weight_comparison"](results, params.figures)
     assert not [line for line in fig.axes[0].get_lines() if line.get_label() == "data"]
@@ -132,3 +132,41 @@ def test_figures_follow_params(params, tmp_path):
     wide = dataclasses.replace(params.figures, width_in=7.0, foot_height_weights=[1.0])
     fig = fig_foot_heights(results, wide)
     assert fig.get_size_inches()[0] == pytest.approx(7.0) and len(fig.axes) == 1
+
+
+def test_legends_sit_outside_the_axes(params, tmp_path):
+    """No legend inside an axes (they covered the data); one figure legend each instead."""
+    results = load_results(crafted_results(tmp_path / "results", params))
+    for name, function in FIGURES.items():
+        fig = function(results, params.figures)
+        assert all(ax.get_legend() is None for ax in fig.axes), name
+        assert len(fig.legends) == 1, name
+
+
+def test_rmse_axis_says_what_is_summed(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    results.metrics["frames"] = 501  # metrics.csv's column: 10 s at 50 Hz, both ends
+    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    label = fig.axes[0].get_ylabel().replace("\n", " ")
+    assert label == "total RMSE: sum of per-frame RMS over 501 frames"
+    assert [ax.get_title() for ax in fig.axes] == [
+        "linear (m/s, summed)",
+        "angular (rad/s, summed)",
+    ]
+
+
+def test_contact_shading_and_reference_trace_are_visible(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    heights = FIGURES["foot_heights"](results, params.figures)
+    labels = [t.get_text() for t in heights.legends[0].get_texts()]
+    assert labels == ["left", "right", "left in contact", "right in contact"]
+    tracking = FIGURES["joint_tracking"](results, params.figures)
+    order = {line.get_label(): line.get_zorder() for line in tracking.axes[0].get_lines()}
+    assert order["reference"] > order["measured"]  # the reference is drawn over the measured
+
+
+def test_foot_rotation_labels_do_not_collide(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["foot_rotations"](results, params.figures)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["", ""]
+    assert [ax.get_title() for ax in fig.axes] == ["left foot", "right foot"]
