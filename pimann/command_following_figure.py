@@ -2,9 +2,11 @@
 
 From `pimann.command_following.summarise_following`'s table alone. One panel per steering
 condition (unsteered above), bars of the achieved speed along the command (median over seeds)
-per model and class, the commanded speed as a black tick with the +-25% criterion as its
-whiskers. Turning in place is left out (no planar command: its yaw rate is in the table), as is
-standing (the stand criterion is a distance). Single IEEE column, legend below the panels.
+per model and class, the commanded speed as a black tick over each bar and the +-25% criterion
+as a grey band behind it (whiskers of adjacent bars ran together into a comb). Turning in place
+is left out (no planar command: its yaw rate is in the table), as is standing (the stand
+criterion is a distance). Single IEEE column, legend above the panels (the profile footer sits
+in the lower corner).
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pimann.params import FiguresParams
 
 PLOTTED_CLASSES = tuple(c for c in CLASSES if c not in ("turning_in_place", "standing"))
 STEERING_TITLES = {False: "no steering", True: "steering"}
+BAND_COLOUR = "0.85"  # the +-25% speed criterion behind the bars
 
 
 def _models(summary: pd.DataFrame) -> dict[str, tuple[str, object]]:
@@ -73,12 +76,10 @@ def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figu
             rows = [part.loc[(model, c)] if (model, c) in part.index else None for c in classes]
             achieved = [np.nan if r is None else r["achieved_speed"] for r in rows]
             commanded = np.array([np.nan if r is None else r["commanded_speed"] for r in rows])
-            ax.bar(offsets, achieved, width=width, color=colour, label=label)
-            ax.errorbar(
-                offsets, commanded, yerr=SPEED_TOLERANCE * commanded, fmt="none",
-                ecolor="0.25", elinewidth=0.5, capsize=0,
-            )  # fmt: skip
-            ax.plot(offsets, commanded, ls="none", marker="_", color="black",
+            ax.bar(offsets, 2 * SPEED_TOLERANCE * commanded, bottom=(1 - SPEED_TOLERANCE) *
+                   commanded, width=width, color=BAND_COLOUR, lw=0, zorder=0)  # fmt: skip
+            ax.bar(offsets, achieved, width=width * 0.8, color=colour, label=label, zorder=2)
+            ax.plot(offsets, commanded, ls="none", marker="_", color="black", zorder=3,
                     markersize=max(3.0, 72 * width * figures.width_in / len(classes) * 0.8),
                     markeredgewidth=1.0)  # fmt: skip
         ax.axhline(0.0, color="0.3", lw=0.5)
@@ -86,9 +87,10 @@ def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figu
         ax.set_ylabel("speed (m/s)")
     axes[-1].set_xticks(x, [c.replace("_", " ") for c in classes])
     handles = [Patch(color=colour, label=label) for label, colour in models.values()]
-    handles.append(
-        Line2D([], [], color="black", marker="_", ls="none", markersize=6,
-               label=f"commanded (\u00b1{SPEED_TOLERANCE:.0%})")
-    )  # fmt: skip
-    fig.legend(handles=handles, loc="outside lower center", ncols=min(4, len(handles)))
+    handles += [
+        Line2D([], [], color="black", marker="_", ls="none", markersize=6, label="commanded"),
+        Patch(color=BAND_COLOUR, label=f"\u00b1{SPEED_TOLERANCE:.0%}"),
+    ]
+    fig.legend(handles=handles, loc="outside upper center", ncols=min(4, len(handles)),
+               columnspacing=1.0, handlelength=1.2)  # fmt: skip
     return fig

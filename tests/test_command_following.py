@@ -325,12 +325,13 @@ def test_figure_of_commanded_and_achieved_speed(tmp_path):
     assert [t.get_text() for t in axes[-1].get_xticklabels()] == ["forward"]
     legend = fig.legends[0]
     assert [t.get_text() for t in legend.get_texts()][:2] == ["baseline", "$w$=10"]
-    # the legend sits below every panel, clear of the data
+    # the legend sits above every panel, clear of the data, inside the figure
     canvas = FigureCanvasAgg(fig)
     canvas.draw()
     renderer = canvas.get_renderer()
-    top = legend.get_window_extent(renderer).y1
-    assert all(top <= ax.get_window_extent(renderer).y0 for ax in axes)
+    box = legend.get_window_extent(renderer)
+    assert all(box.y0 >= ax.get_window_extent(renderer).y1 for ax in axes)
+    assert box.x0 >= 0 and box.x1 <= fig.bbox.x1
     assert (tmp_path / "following.png").stat().st_size > 1000
     only_stand = summary[summary["class"] == "standing"]
     assert fig_command_following(only_stand, figures) is None
