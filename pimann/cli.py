@@ -62,7 +62,14 @@ def cmd_render(args: argparse.Namespace) -> None:
     from pimann.render import render_file
 
     skeleton = _skeleton(args) if args.mocap else None
-    render_file(args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton)
+    options = {
+        "strip_frames": args.frames, "strip_columns": args.columns, "frame_rate": args.fps,
+        "width": args.width, "height": args.height,
+    }  # fmt: skip
+    render_file(
+        args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton,
+        **{k: v for k, v in options.items() if v is not None},
+    )  # fmt: skip
 
 
 def cmd_generate(args: argparse.Namespace) -> None:
@@ -142,6 +149,23 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--group", help="clip group inside a collection file")
     render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
     render.add_argument("--skeleton", help=SKELETON_HELP)
+    render.add_argument(
+        "--frames", type=int, metavar="N", help="frames of a .png strip, evenly over the clip "
+        "(default 12)"
+    )  # fmt: skip
+    render.add_argument(
+        "--columns", type=int, metavar="N", help="frames per row of a .png strip (default 4)"
+    )
+    render.add_argument(
+        "--fps", type=float, metavar="F", help="frames per second of the clip in a .gif or "
+        ".mp4, played in real time (default: every second sample)"
+    )  # fmt: skip
+    render.add_argument(
+        "--width", type=int, metavar="PX", help="of each frame (strip 480, animation 960)"
+    )
+    render.add_argument(
+        "--height", type=int, metavar="PX", help="of each frame (strip 320, animation 480)"
+    )
 
     generate = add("generate", cmd_generate, "roll a trained model out on one scenario")
     generate.add_argument("model_dir", type=Path)

@@ -7,43 +7,39 @@ world view would pull them apart). Left limbs are blue and right limbs red in bo
 
 Drawing is a hand-made orthographic projection onto plain 2-D matplotlib axes rather than
 mplot3d: a stick figure needs no hidden-surface removal beyond drawing far bones first, and
-reusing one Agg figure whose artists are only updated keeps a frame at a few milliseconds.
+reusing one Agg figure whose artists are only updated keeps a frame at a few milliseconds
+(pimann.render_scene). Files: pimann.picture_files (strips wrap into rows of four).
 """
 
 from __future__ import annotations
 
-import dataclasses
 import logging
-from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
 import pinocchio as pin
-from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.collections import LineCollection, PolyCollection
-from matplotlib.colors import to_rgba
-from matplotlib.figure import Figure
-from matplotlib.lines import Line2D
-from tqdm import tqdm
 
-from pimann.atomic import atomic_path
 from pimann.contacts import detect_contacts, trajectory_configurations
 from pimann.errors import PimannError
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_human
 from pimann.params import SkeletonParams
+from pimann.picture_files import FORMATS, STRIP_COLUMNS, check_output, write_pictures
+from pimann.render_scene import CENTRE_COLOUR, LEFT_COLOUR, RIGHT_COLOUR, Scene, Skeleton
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot, load_robot
 from pimann.trajectory import Trajectory, read_trajectory
 
 log = logging.getLogger(__name__)
 
-FORMATS = (".gif", ".mp4", ".png")
-LEFT_COLOUR = "#1f5fbf"
-RIGHT_COLOUR = "#d62728"
-CENTRE_COLOUR = "#3a3a3a"
-BACKGROUND = "#ffffff"
-GRID_COLOUR = "#b8b8b8"
-PATH_COLOUR = "#2ca02c"
+__all__ = [
+    "FORMATS", "LEFT_COLOUR", "RIGHT_COLOUR", "STRIP_FRAMES", "Skeleton", "check_output",
+    "human_skeleton", "match_frames", "render_file", "render_trajectory", "robot_skeleton",
+    "strip_frame_indices", "write_pictures",
+]  # fmt: skip
+
+STRIP_FRAMES = 12  # frames of a .png strip: one about every step of a 10 s walk
+STRIP_SIZE = (480, 320)  # px of each strip frame (an animation's default: 960 x 480)
+ANIMATION_SIZE = (960, 480)
 
 # ergoCub's sole (pimann.robot), corners in drawing order around the rectangle
 FOOT_CORNERS = SOLE_CORNERS[[0, 1, 3, 2]]
@@ -69,15 +65,6 @@ HUMAN_BONES = (
     ("T8", "RightUpperArm"), ("RightUpperArm", "RightForeArm"), ("RightForeArm", "RightHand"),
 )  # fmt: skip
 
-# Camera: fixed world direction, from the subject's right front, slightly above.
-AZIMUTH_DEG = -60.0
-ELEVATION_DEG = 15.0
-VIEW_BELOW = 0.45  # m of view below the floor point under the subject
-VIEW_ABOVE = 1.95  # m of view above it (ergoCub is 1.6 m, the person ~1.8 m)
-GRID_STEP = 0.5
-GRID_RADIUS = 3.0
-GRID_PIECE = 1.0
-
 
 def _side_colour(name: str) -> str:
     if name.startswith(("l_", "Left")):
@@ -85,25 +72,6 @@ def _side_colour(name: str) -> str:
     if name.startswith(("r_", "Right")):
         return RIGHT_COLOUR
     return CENTRE_COLOUR
-
-
-@dataclasses.dataclass
-class Skeleton:
-    """One subject's drawing data for the rendered frames (N of them)."""
-
-    title: str
-    points: np.ndarray  # (N, P, 3) world positions
-    bones: np.ndarray  # (B, 2) indices into points, (parent end, child end)
-    bone_colours: list[str]  # (B,)
-    path: np.ndarray  # (M, 2) ground path of the base over the whole clip
-    path_index: np.ndarray  # (N,) index into path of each rendered frame
-    feet: np.ndarray | None = None  # (N, 2, 4, 3) sole rectangles, left then right
-    contacts: np.ndarray | None = None  # (N, 2) bool
-
-    @property
-    def centre(self) -> np.ndarray:
-        """(N, 2) ground point each panel follows."""
-        return self.path[self.path_index]
 
 
 def robot_skeleton(
@@ -207,208 +175,16 @@ def match_frames(times: np.ndarray, source_times: np.ndarray) -> np.ndarray:
     return np.where(nearer_left, left, right) if len(source) > 1 else np.zeros_like(right)
 
 
-class _Camera:
-    """Orthographic projection from a fixed world direction: (u right, v up, depth far)."""
-
-    def __init__(self, azimuth_deg: float = AZIMUTH_DEG, elevation_deg: float = ELEVATION_DEG):
-        az, el = np.radians(azimuth_deg), np.radians(elevation_deg)
-        towards_camera = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
-        forward = -towards_camera
-        right = np.cross(forward, [0.0, 0.0, 1.0])
-        right /= np.linalg.norm(right)
-        up = np.cross(right, forward)
-        self.matrix = np.stack([right, up, forward])  # rows: u, v, depth
-
-    def project(self, points: np.ndarray) -> np.ndarray:
-        return np.asarray(points) @ self.matrix.T
+def strip_frame_indices(count: int, frames: int) -> np.ndarray:
+    """`frames` indices evenly over `count` samples, first and last included (fewer when the
+    clip is shorter)."""
+    return np.unique(np.linspace(0, count - 1, frames).round().astype(int))
 
 
-class _Panel:
-    """One subject's axes; its artists are created once and only updated per frame."""
-
-    def __init__(self, figure: Figure, rect: Sequence[float], skeleton: Skeleton, span_u: float):
-        self.skeleton = skeleton
-        self.span_u = span_u
-        ax = figure.add_axes(rect)
-        ax.set_axis_off()
-        ax.set_facecolor(BACKGROUND)
-        self.ax = ax
-        self.grid = LineCollection([], colors=GRID_COLOUR, linewidths=0.8, zorder=0)
-        self.path_all = ax.plot([], [], color=PATH_COLOUR, alpha=0.25, lw=1.5, zorder=1)[0]
-        self.path_done = ax.plot([], [], color=PATH_COLOUR, lw=2.0, zorder=1)[0]
-        self.feet = PolyCollection([], linewidths=1.5, zorder=2)
-        self.bones = LineCollection([], linewidths=3.0, capstyle="round", zorder=3)
-        self.joints = ax.plot([], [], "o", color="#222222", ms=2.5, zorder=4)[0]
-        ax.add_collection(self.grid)
-        ax.add_collection(self.feet)
-        ax.add_collection(self.bones)
-        # redrawn every frame over a saved background (blitting); the rest is drawn once
-        self.dynamic = (
-            self.grid,
-            self.path_all,
-            self.path_done,
-            self.feet,
-            self.bones,
-            self.joints,
-        )
-        for artist in self.dynamic:
-            artist.set_animated(True)
-        ax.text(
-            0.03,
-            0.96,
-            skeleton.title,
-            transform=ax.transAxes,
-            fontsize=12,
-            fontweight="bold",
-            va="top",
-            color=CENTRE_COLOUR,
-        )
-        self.colours = np.array(skeleton.bone_colours)
-        self.grid_lines = self._grid_lines()
-        self.grid_rgba = np.tile(to_rgba(GRID_COLOUR), (len(self.grid_lines), 1))
-
-    @staticmethod
-    def _grid_lines() -> np.ndarray:
-        """(L, 2, 3) floor grid around the origin, in 1 m pieces that fade out one by one."""
-        ticks = np.arange(-GRID_RADIUS, GRID_RADIUS + 1e-9, GRID_STEP)
-        starts = np.arange(-GRID_RADIUS, GRID_RADIUS - 1e-9, GRID_PIECE)
-        a, b = np.meshgrid(ticks, starts, indexing="ij")
-        a, b = a.ravel(), b.ravel()
-        zero = np.zeros_like(a)
-        ends = np.minimum(b + GRID_PIECE, GRID_RADIUS)
-        along_y = np.stack([np.stack([a, b, zero], -1), np.stack([a, ends, zero], -1)], 1)
-        along_x = along_y[:, :, [1, 0, 2]]
-        return np.concatenate([along_y, along_x])
-
-    def update(self, camera: _Camera, n: int) -> None:
-        sk = self.skeleton
-        centre = sk.centre[n]
-        snapped = np.round(centre / GRID_STEP) * GRID_STEP
-        grid = self.grid_lines + np.array([snapped[0], snapped[1], 0.0])
-        distance = np.linalg.norm(grid[:, :, :2].mean(axis=1) - centre, axis=1)
-        self.grid_rgba[:, 3] = np.clip(1.0 - distance / GRID_RADIUS, 0.0, 1.0)  # fade out
-        self.grid.set_segments(camera.project(grid)[..., :2])
-        self.grid.set_color(self.grid_rgba)
-
-        path = np.column_stack([sk.path, np.zeros(len(sk.path))])
-        path_uv = camera.project(path)
-        self.path_all.set_data(path_uv[:, 0], path_uv[:, 1])
-        done = path_uv[: sk.path_index[n] + 1]
-        self.path_done.set_data(done[:, 0], done[:, 1])
-
-        uvd = camera.project(sk.points[n])
-        segments = uvd[sk.bones]  # (B, 2, 3)
-        order = np.argsort(-segments[:, :, 2].mean(axis=1))  # far bones first
-        self.bones.set_segments(segments[order, :, :2])
-        self.bones.set_color(self.colours[order])
-        self.joints.set_data(uvd[:, 0], uvd[:, 1])
-
-        if sk.feet is not None:
-            feet_uv = camera.project(sk.feet[n])[..., :2]
-            edge = [LEFT_COLOUR, RIGHT_COLOUR]
-            face = [c if on else "none" for c, on in zip(edge, sk.contacts[n], strict=True)]
-            self.feet.set_verts(list(feet_uv))
-            self.feet.set_edgecolor(edge)
-            self.feet.set_facecolor(face)
-            self.feet.set_alpha(None)
-
-        ground = camera.project(np.array([centre[0], centre[1], 0.0]))
-        self.ax.set_xlim(ground[0] - self.span_u / 2, ground[0] + self.span_u / 2)
-        self.ax.set_ylim(ground[1] - VIEW_BELOW, ground[1] + VIEW_ABOVE)
-
-
-class _Scene:
-    """One reused Agg figure holding a panel per subject; `draw(n)` gives an RGB frame."""
-
-    def __init__(self, skeletons: Sequence[Skeleton], times: np.ndarray, width: int, height: int):
-        dpi = 100
-        self.figure = Figure(figsize=(width / dpi, height / dpi), dpi=dpi, facecolor=BACKGROUND)
-        self.canvas = FigureCanvasAgg(self.figure)
-        self.camera = _Camera()
-        n = len(skeletons)
-        metres_per_pixel = (VIEW_BELOW + VIEW_ABOVE) / height
-        span_u = (width / n) * metres_per_pixel  # one scale for every panel
-        self.panels = [
-            _Panel(self.figure, [k / n, 0.0, 1.0 / n, 1.0], sk, span_u)
-            for k, sk in enumerate(skeletons)
-        ]
-        for k in range(1, n):  # a faint divider between the subjects
-            self.figure.add_artist(Line2D([k / n] * 2, [0.0, 1.0], color=GRID_COLOUR, lw=1.0))
-        self.times = times
-        self.clock = self.figure.text(0.99, 0.97, "", ha="right", va="top", fontsize=11)
-        self.clock.set_animated(True)
-        for y, (label, colour) in enumerate((("left", LEFT_COLOUR), ("right", RIGHT_COLOUR))):
-            self.figure.text(0.99, 0.02 + 0.04 * y, label, color=colour, ha="right", fontsize=9)
-        self.canvas.draw()  # the static part, once
-        self.background = self.canvas.copy_from_bbox(self.figure.bbox)
-
-    def draw(self, n: int) -> np.ndarray:
-        self.canvas.restore_region(self.background)
-        for panel in self.panels:
-            panel.update(self.camera, n)
-            for artist in panel.dynamic:
-                panel.ax.draw_artist(artist)
-        self.clock.set_text(f"t = {self.times[n]:.2f} s")
-        self.figure.draw_artist(self.clock)
-        rgba = np.asarray(self.canvas.buffer_rgba())
-        return rgba[..., :3].copy()
-
-    def frames(self, count: int, description: str) -> Iterator[np.ndarray]:
-        for n in tqdm(range(count), desc=description, unit="frame", leave=False):
-            yield self.draw(n)
-
-
-def check_output(path: Path) -> str:
-    """The picture format of `path` (.gif, .mp4, .png), or a PimannError naming the file."""
-    suffix = path.suffix.lower()
-    if suffix not in FORMATS:
-        raise PimannError(
-            path, f"unknown picture format {path.suffix or '(none)'!r}; use one of {FORMATS}"
-        )
-    if suffix == ".mp4":
-        try:
-            import imageio_ffmpeg  # noqa: F401
-        except ImportError:
-            raise PimannError(
-                path, "writing .mp4 needs the imageio-ffmpeg package; use .gif or .png"
-            ) from None
-    return suffix
-
-
-def _write_gif(path: Path, frames: Iterator[np.ndarray], fps: float) -> None:
-    """Pillow GIF with each frame quantised as it comes (1 byte a pixel held, not 3)."""
-    from PIL import Image
-
-    images = [
-        Image.fromarray(f).quantize(
-            colors=64, method=Image.Quantize.FASTOCTREE, dither=Image.Dither.NONE
-        )
-        for f in frames
-    ]
-    images[0].save(path, save_all=True, append_images=images[1:], duration=1000.0 / fps, loop=0)
-
-
-def _write_mp4(path: Path, frames: Iterator[np.ndarray], fps: float) -> None:
-    """Frames streamed to ffmpeg (H.264), never all held in memory."""
-    import imageio.v2 as imageio
-
-    with imageio.get_writer(
-        path, format="FFMPEG", fps=fps, codec="libx264", quality=7, macro_block_size=2
-    ) as writer:
-        for frame in frames:
-            writer.append_data(frame)
-
-
-def write_pictures(output_path: Path, pictures: Iterator[np.ndarray], fps: float) -> None:
-    """Pictures to a .png strip, a .gif or an .mp4 (by the suffix), written atomically."""
-    suffix = check_output(output_path)
-    with atomic_path(output_path) as tmp:
-        if suffix == ".png":
-            _write_strip(tmp, list(pictures))
-        elif suffix == ".gif":
-            _write_gif(tmp, pictures, fps)
-        else:
-            _write_mp4(tmp, pictures, fps)
+def clip_rate(clock: np.ndarray) -> float:
+    """Samples per second of a clip's clock (25 for a single sample)."""
+    duration = clock[-1] - clock[0] if len(clock) > 1 else 0.0
+    return (len(clock) - 1) / duration if duration > 0 else 25.0
 
 
 def render_trajectory(
@@ -417,31 +193,43 @@ def render_trajectory(
     human: HumanMotion | None = None,
     *,
     fps: float | None = None,
-    width: int = 960,
-    height: int = 480,
+    frame_rate: float | None = None,
+    width: int | None = None,
+    height: int | None = None,
     every_n_frames: int = 2,
-    strip_frames: int = 6,
+    strip_frames: int = STRIP_FRAMES,
+    strip_columns: int = STRIP_COLUMNS,
     robot: Robot | None = None,
 ) -> Path:
     """Draw the robot (and the person beside it) to a .gif, .mp4 or .png strip.
 
-    GIF and MP4 show every `every_n_frames`-th frame at `fps` (default: real time); a PNG
-    is `strip_frames` evenly spaced frames side by side, each `width` x `height` pixels.
-    `human` may be at another rate: frames are matched by time. Either subject may be None.
+    GIF and MP4 show every `every_n_frames`-th sample, or `frame_rate` frames per second of
+    the clip, played at `fps` (default: real time), each `width` x `height` (960 x 480). A PNG
+    is `strip_frames` evenly spaced frames in rows of `strip_columns`, each 480 x 320 unless
+    given. `human` may be at another rate: frames are matched by time. Either subject may be
+    None.
     """
     output_path = Path(output_path)
     suffix = check_output(output_path)
+    default_width, default_height = STRIP_SIZE if suffix == ".png" else ANIMATION_SIZE
+    width, height = width or default_width, height or default_height
     if trajectory is None and human is None:
         raise PimannError(output_path, "nothing to render: no trajectory and no human motion")
-    if width < 64 or height < 64 or every_n_frames < 1 or strip_frames < 1:
-        raise PimannError(output_path, "width/height must be >= 64, frame counts >= 1")
+    counts = (every_n_frames, strip_frames, strip_columns)
+    if width < 64 or height < 64 or min(counts) < 1 or (frame_rate is not None and frame_rate <= 0):
+        raise PimannError(
+            output_path, "width/height must be >= 64, frame counts >= 1, the frame rate > 0"
+        )
     clock = np.asarray(trajectory.time if trajectory is not None else human.time, dtype=float)
     source = trajectory.source if trajectory is not None else human.source
     if len(clock) == 0:
         raise PimannError(source, "no frames to render")
 
+    rate = clip_rate(clock)
+    if frame_rate is not None:
+        every_n_frames = max(1, round(rate / frame_rate))
     if suffix == ".png":
-        frames = np.unique(np.linspace(0, len(clock) - 1, strip_frames).round().astype(int))
+        frames = strip_frame_indices(len(clock), strip_frames)
     else:
         frames = np.arange(0, len(clock), every_n_frames)
     times = clock[frames]
@@ -450,25 +238,13 @@ def render_trajectory(
         skeletons.append(robot_skeleton(trajectory, frames, robot))
     if human is not None:
         skeletons.append(human_skeleton(human, match_frames(times, human.time)))
-    scene = _Scene(skeletons, times - clock[0], width, height)
+    scene = Scene(skeletons, times - clock[0], width, height)
 
-    if fps is None:
-        duration = clock[-1] - clock[0]
-        rate = (len(clock) - 1) / duration if duration > 0 else 25.0
-        fps = rate / every_n_frames
+    fps = rate / every_n_frames if fps is None else fps
     log.info("rendering %d frames of %s to %s", len(frames), source, output_path)
-    write_pictures(output_path, scene.frames(len(frames), output_path.name), fps)
+    pictures = scene.frames(len(frames), output_path.name)
+    write_pictures(output_path, pictures, fps, strip_columns)
     return output_path
-
-
-def _write_strip(path: Path, pictures: list[np.ndarray]) -> None:
-    import imageio.v3 as iio
-
-    separator = np.full((pictures[0].shape[0], 3, 3), 120, dtype=np.uint8)
-    row = [pictures[0]]
-    for picture in pictures[1:]:
-        row += [separator, picture]
-    iio.imwrite(path, np.concatenate(row, axis=1), extension=".png")
 
 
 def render_file(

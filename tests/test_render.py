@@ -191,3 +191,45 @@ def test_render_file_with_human_beside(tmp_path, robot):
 def test_nothing_to_render(tmp_path):
     with pytest.raises(PimannError, match="nothing to render"):
         render_trajectory(None, tmp_path / "x.png")
+
+
+def test_strip_wraps_into_rows(tmp_path, robot):
+    """6 frames in rows of 4: two rows, the last two places white (one row was 5775 px)."""
+    out = render_trajectory(
+        standing(12), tmp_path / "w.png", strip_frames=6, strip_columns=4, width=W, height=H
+    )
+    image = iio.imread(out)[..., :3]
+    assert image.shape[:2] == (2 * H + 3, 4 * W + 3 * 3)
+    second_row = image[H + 3 :]
+    for k in range(4):
+        tile = second_row[:, k * (W + 3) : k * (W + 3) + W]
+        assert (colour_pixels(tile, LEFT_COLOUR) > 50) == (k < 2), k
+    assert (second_row[:, 2 * (W + 3) :] >= 120).all()  # white places and grey separators
+
+
+def test_default_strip_is_twelve_frames_in_three_rows(tmp_path, robot):
+    out = render_trajectory(standing(40), tmp_path / "d.png")
+    assert iio.imread(out).shape[:2] == (3 * 320 + 2 * 3, 4 * 480 + 3 * 3)
+
+
+def test_frame_rate_samples_the_clip(tmp_path, robot):
+    """frame_rate: frames per second of the clip, played in real time (50 Hz clip, 10 fps)."""
+    out = render_trajectory(standing(11), tmp_path / "r.gif", frame_rate=10.0, width=W, height=H)
+    assert iio.imread(out, index=None).shape[0] == 3  # samples 0, 5, 10
+    assert iio.immeta(out, index=0)["duration"] == pytest.approx(100, abs=1)
+
+
+def test_cli_render_frames_and_fps(tmp_path, robot):
+    from pimann.cli import main
+
+    path = tmp_path / "t.h5"
+    write_trajectory(path, standing(10))
+    size = ["--width", str(W), "--height", str(H)]
+    strip = tmp_path / "s.png"
+    assert (
+        main(["render", str(path), "-o", str(strip), "--frames", "5", "--columns", "3", *size]) == 0
+    )
+    assert iio.imread(strip).shape[:2] == (2 * H + 3, 3 * W + 2 * 3)
+    gif = tmp_path / "a.gif"
+    assert main(["render", str(path), "-o", str(gif), "--fps", "25", *size]) == 0
+    assert iio.imread(gif, index=None).shape[0] == 5  # every second sample of 10

@@ -167,7 +167,8 @@ def test_cli_simulate_runs(tmp_path, capsys, sim_robot, sim_params):
     assert summary["simulated_s"] == pytest.approx(1.5) and not summary["fallen"]
     with h5py.File(out) as file:
         assert file.attrs["source"] == str(source) and len(file["time"]) == 150
-    assert iio.imread(strip).shape[0] == sim_params.video_height
+    h, w = sim_params.video_height, sim_params.video_width
+    assert iio.imread(strip).shape[:2] == (3 * h + 2 * 3, 4 * w + 3 * 3)  # 12 frames, rows of 4
 
 
 def _picture_has_subject(picture: np.ndarray) -> bool:

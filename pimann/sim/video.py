@@ -15,7 +15,13 @@ from pathlib import Path
 import numpy as np
 
 from pimann.params import SimulateParams
-from pimann.render import check_output, render_trajectory, write_pictures
+from pimann.render import (
+    STRIP_FRAMES,
+    check_output,
+    render_trajectory,
+    strip_frame_indices,
+    write_pictures,
+)
 from pimann.robot import load_robot
 from pimann.trajectory import Trajectory
 
@@ -71,13 +77,13 @@ def render_simulation(
     every_n_frames: int = 4,
     width: int = 480,
     height: int = 360,
-    strip_frames: int = 6,
+    strip_frames: int = STRIP_FRAMES,
     use_mujoco: bool = True,
 ) -> Path:
     """Draw a simulated run (`trajectory`: its measured states) to .mp4, .gif or a .png strip.
 
     MP4 and GIF play every `every_n_frames`-th sample in real time; PNG puts `strip_frames`
-    evenly spaced frames side by side. `use_mujoco=False`, or a GL backend that does not
+    evenly spaced frames in rows of four. `use_mujoco=False`, or a GL backend that does not
     start, draws pimann.render's stick figure instead.
     """
     output_path = Path(output_path)
@@ -95,7 +101,7 @@ def render_simulation(
         )  # fmt: skip
     clock = np.asarray(trajectory.time, dtype=float)
     if suffix == ".png":
-        frames = np.unique(np.linspace(0, len(clock) - 1, strip_frames).round().astype(int))
+        frames = strip_frame_indices(len(clock), strip_frames)
     else:
         frames = np.arange(0, len(clock), every_n_frames)
     span = clock[-1] - clock[0] if len(clock) > 1 else 0.0
