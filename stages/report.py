@@ -1,0 +1,38 @@
+"""DVC stage `report`: results/ and paper_figures/ -> results/metrics.json (the study's key
+numbers, the pipeline's DVC metrics; pimann.key_metrics) and results/report.html (the study on
+one self-contained page; pimann.report)."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import time
+from pathlib import Path
+
+from pimann.logs import quiet_third_party
+from pimann.params import load_params
+from pimann.paths import REPO_ROOT
+from pimann.report import write_report
+from pimann.stage import stage_entry
+
+log = logging.getLogger("report")
+
+
+@stage_entry
+def main(argv: list[str] | None = None) -> None:
+    quiet_third_party()
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--results", type=Path, default=Path("results"))
+    parser.add_argument("--figures", type=Path, default=Path("paper_figures"))
+    args = parser.parse_args(argv)
+    started = time.perf_counter()
+    metrics, report = write_report(
+        REPO_ROOT / args.results, REPO_ROOT / args.figures, load_params()
+    )
+    log.info("%s, %s (%.1f MB) in %.1f s", metrics, report, report.stat().st_size / 1e6,
+             time.perf_counter() - started)  # fmt: skip
+
+
+if __name__ == "__main__":
+    sys.exit(main())

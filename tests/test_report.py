@@ -1,0 +1,148 @@
+"""The report page (pimann.report) from a crafted results/ folder: self-contained (every
+image and video a data: URI, no http(s) address, no script), and, where a headless Chromium
+is installed, every image and video loads in it."""
+
+from __future__ import annotations
+
+import json
+import re
+import shutil
+import subprocess
+from html.parser import HTMLParser
+
+import imageio.v2 as imageio
+import numpy as np
+import pytest
+from test_command_following import crafted_rows
+from test_figures import crafted_results
+from test_key_metrics import SIM_SUMMARY
+
+from pimann.params import load_params
+from pimann.report import build_report, markdown_html, write_report
+
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable",
+            "chromium-headless-shell", "chrome-headless-shell")  # fmt: skip
+INSTALL_HINT = (
+    "no headless browser on PATH (looked for " + ", ".join(BROWSERS) + "); on Debian "
+    "`apt-get install -y --no-install-recommends chromium` provides one"
+)
+
+
+class _Attributes(HTMLParser):
+    """Every (tag, attribute, value) of a page."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.found: list[tuple[str, str, str]] = []
+
+    def handle_starttag(self, tag, attrs):
+        self.found += [(tag, name, value or "") for name, value in attrs]
+
+
+def attributes(page: str) -> list[tuple[str, str, str]]:
+    parser = _Attributes()
+    parser.feed(page)
+    return parser.found
+
+
+@pytest.fixture(scope="module")
+def params():
+    return load_params()
+
+
+@pytest.fixture(scope="module")
+def study(params, tmp_path_factory):
+    """results/ with every input of the report, paper_figures/ with two small PNGs."""
+    root = tmp_path_factory.mktemp("study")
+    results = crafted_results(root / "results", params)
+    crafted_rows().to_csv(results / "command_following.csv", index=False)
+    (results / "command_following.md").write_text(
+        "<!-- generated -->\n# Command following\n\n| model | speed |\n|---|---|\n| w10 | 0.8 |\n"
+    )
+    (results / "data_report.md").write_text(
+        "# Data report\n\n| source | fwd |\n|---|---|\n| a | 1 |\n"
+    )
+    (results / "sim_summary.json").write_text(json.dumps(SIM_SUMMARY))
+    figures = root / "paper_figures"
+    figures.mkdir()
+    for k, path in enumerate((figures / "a.png", figures / "b.png", results / "data_report.png",
+                              results / "command_following.png")):  # fmt: skip
+        imageio.imwrite(path, np.full((40, 60 + k, 3), 40 * k, dtype=np.uint8))
+    frames = [np.full((64, 96, 3), 20 * k, dtype=np.uint8) for k in range(10)]
+    imageio.mimwrite(results / "sim" / "w10-0-mixed-steering.mp4", frames, fps=10,
+                     codec="libx264", macro_block_size=2)  # fmt: skip
+    return results, figures
+
+
+def test_report_embeds_everything_and_reaches_nothing(study, params):
+    results, figures = study
+    metrics_path, report = write_report(results, figures, params)
+    page = report.read_text()
+    found = attributes(page)
+    sources = [(tag, value) for tag, name, value in found if name == "src"]
+    assert sorted(tag for tag, _ in sources) == ["img"] * 4 + ["video"]
+    assert all(value.startswith(("data:image/png;base64,", "data:video/mp4;base64,"))
+               for _, value in sources)  # fmt: skip
+    links = [value for _, name, value in found if name in ("href", "src", "srcset", "poster")]
+    assert not [v for v in links if re.match(r"\s*(https?:)?//", v, re.IGNORECASE)]
+    assert "<script" not in page and "<link" not in page and "@import" not in page
+    for section in ("claims", "figures", "following", "simulation", "data", "params"):
+        assert f'id="{section}"' in page
+    assert "<details>" in page and params.profile in page  # the params, collapsed
+    assert "<table>" in page and "| model |" not in page  # Markdown tables rendered
+    assert json.loads(metrics_path.read_text())["sim.runs"] == 2
+
+
+def test_missing_inputs_say_which_stage(study, params, tmp_path):
+    results, _ = study
+    page = build_report(results, tmp_path / "no_figures", params, {})
+    assert "dvc repro figures" in page
+
+
+def test_markdown_tables_and_comments():
+    out = markdown_html("<!-- provenance: {} -->\n| a | b \\| c |\n|---|---|\n| 1 | 2 |\n")
+    assert "<table>" in out and "provenance" not in out and "b | c" in out
+
+
+def _browser() -> str | None:
+    return next((path for name in BROWSERS if (path := shutil.which(name))), None)
+
+
+PROBE = """<pre id="probe"></pre><script>
+function report() {
+  const images = [...document.images].map(i => i.complete && i.naturalWidth > 0);
+  const videos = [...document.querySelectorAll("video")].map(v => v.readyState);
+  document.getElementById("probe").textContent = JSON.stringify({images, videos});
+}
+const pending = [...document.querySelectorAll("video")].filter(v => v.readyState < 1);
+let left = pending.length;
+if (!left) { window.addEventListener("load", report); }
+for (const v of pending) {
+  const done = () => { if (--left === 0) report(); };
+  v.addEventListener("loadedmetadata", done); v.addEventListener("error", done);
+  v.load();
+}
+setTimeout(report, 8000);
+</script>"""
+
+
+@pytest.mark.slow
+def test_every_image_and_video_loads_in_a_browser(study, params, tmp_path):
+    browser = _browser()
+    if browser is None:
+        pytest.skip(INSTALL_HINT)
+    results, figures = study
+    _, report = write_report(results, figures, params, tmp_path / "report.html")
+    probed = tmp_path / "probed.html"  # the page plus a script that reports what loaded
+    probed.write_text(report.read_text().replace("</body>", PROBE + "</body>"))
+    run = subprocess.run(
+        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+         f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=20000",
+         "--dump-dom", probed.as_uri()],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    match = re.search(r'<pre id="probe">(.*?)</pre>', run.stdout, re.DOTALL)
+    assert match and match.group(1), run.stderr[-2000:]
+    loaded = json.loads(match.group(1))
+    assert loaded["images"] == [True] * 4
+    assert len(loaded["videos"]) == 1 and min(loaded["videos"]) >= 1  # HAVE_METADATA
