@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 
@@ -35,3 +37,17 @@ def require_finite(path: str | Path, name: str, values, *, frame_axis: int = 0) 
         other_axes = tuple(a for a in range(values.ndim) if a != frame_axis)
         frame = int(np.flatnonzero(bad.any(axis=other_axes) if other_axes else bad)[0])
         raise PimannError(path, f"{name} holds NaN or infinite values", frame=frame)
+
+
+@contextmanager
+def about(path: str | Path, what: str | None = None) -> Iterator[None]:
+    """Errors raised inside name `path` (and `what`, e.g. a run or a group), whatever they
+    named before: a computation deep in a stage knows the problem, its caller knows the file."""
+    try:
+        yield
+    except PimannError as error:
+        if error.path == str(path) and what is None:
+            raise
+        inner = "" if error.path in (None, str(path)) else f" [{error.path}]"
+        prefix = f"{what}: " if what else ""
+        raise PimannError(path, f"{prefix}{error.problem}{inner}", frame=error.frame) from None

@@ -47,7 +47,7 @@ from pimann.contacts import (
     frame_period,
     trajectory_configurations,
 )
-from pimann.errors import PimannError
+from pimann.errors import PimannError, about
 from pimann.params import EvaluateParams, load_params
 from pimann.robot import Robot, load_robot
 from pimann.trajectory import Trajectory, iter_collection, read_trajectory
@@ -393,8 +393,12 @@ def metrics_for_file(
     except OSError:
         pass  # read_trajectory raises the proper PimannError below
     if not is_collection:
-        return trajectory_metrics(read_trajectory(path), robot, params)
-    result = {name: trajectory_metrics(t, robot, params) for name, t in iter_collection(path)}
+        with about(path):
+            return trajectory_metrics(read_trajectory(path), robot, params)
+    result = {}
+    for name, trajectory in iter_collection(path):
+        with about(path, f"group {name!r}"):
+            result[name] = trajectory_metrics(trajectory, robot, params)
     if not result:
         raise PimannError(path, "holds no trajectory")
     return result

@@ -8,6 +8,7 @@ overrides from `profiles` (dotted keys), which scale data and epochs and nothing
 from __future__ import annotations
 
 import dataclasses
+import math
 import types
 import typing
 from pathlib import Path
@@ -16,6 +17,7 @@ from typing import Any, Literal
 import yaml
 
 from pimann.errors import PimannError
+from pimann.params_checks import check_params
 from pimann.paths import REPO_ROOT
 
 DEFAULT_PARAMS = REPO_ROOT / "params.yaml"
@@ -325,7 +327,9 @@ def _build(kind: Any, value: Any, key: str, source: Path) -> Any:
         return {k: _build(item, v, _join(key, str(k)), source) for k, v in value.items()}
     if kind is Any:
         return value
-    if kind is float and isinstance(value, int) and not isinstance(value, bool):
+    if kind is float and isinstance(value, int | float) and not isinstance(value, bool):
+        if not math.isfinite(value):
+            raise PimannError(source, f"{key} must be a finite number, not {value!r}")
         return float(value)
     if not isinstance(value, kind) or (kind is int and isinstance(value, bool)):
         raise PimannError(source, f"{key} must be {kind.__name__}, not {value!r}")
@@ -366,13 +370,7 @@ def load_params(path: str | Path = DEFAULT_PARAMS) -> Params:
         raise PimannError(path, f"profile {profile!r} is not one of profiles {sorted(profiles)}")
     _apply_overrides(raw, profiles[profile], path)
     params = _build(Params, raw, "", path)
-    for name, source in params.data.sources.items():
-        if source.skeleton != "auto" and source.skeleton not in params.data.skeletons:
-            raise PimannError(
-                path,
-                f"unknown skeleton {source.skeleton!r} in data.sources.{name}.skeleton; "
-                f"known: auto, {', '.join(sorted(params.data.skeletons)) or '(none)'}",
-            )
+    check_params(params, path)  # values: ranges and cross-references
     return params
 
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from pimann.errors import PimannError
 from pimann.features import split_sources
@@ -24,6 +25,7 @@ from pimann.mocap.clips import (
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_trajectory as mirror
 from pimann.params import load_params
+from pimann.paths import REPO_ROOT
 from pimann.robot import N_JOINTS, SEGMENTS
 from pimann.trajectory import Trajectory
 
@@ -68,16 +70,22 @@ def test_selection_by_content_style_and_spread(data):
     assert {t.content for t in source_takes("bandai_namco", backward, data)} == {"walk-back"}
 
 
-def test_every_source_glob_matches_and_quick_profile_is_small(data):
-    takes = select_takes(data)
-    assert {t.source for t in takes} == set(data.sources)
+def test_every_source_glob_matches_and_quick_profile_is_small(data, tmp_path):
+    raw = yaml.safe_load((REPO_ROOT / "params.yaml").read_text())
+    raw["profile"] = "paper"  # every take of every source
+    paper_path = tmp_path / "params.yaml"
+    paper_path.write_text(yaml.safe_dump(raw))
+    paper = load_params(paper_path).data
+    takes = select_takes(paper)
+    assert {t.source for t in takes} == set(paper.sources)
     assert len({t.name for t in takes}) == len(takes)
     idle = [t for t in takes if t.source == "reactidle"]
-    assert all(t.content is None and t.clip_s == data.sources["reactidle"].clip_s for t in idle)
-    quick = load_params()  # the repository's params, whatever profile they pick
-    if quick.profile == "quick":
-        counts = {k: sum(t.source == k for t in takes) for k in data.sources}
-        assert counts["bandai_namco"] == 30 and counts["reactidle"] == 1
+    assert len(idle) == 10
+    assert all(t.content is None and t.clip_s == paper.sources["reactidle"].clip_s for t in idle)
+    if load_params().profile == "quick":  # the repository's params, whatever profile they pick
+        quick = select_takes(data)
+        counts = {k: sum(t.source == k for t in quick) for k in data.sources}
+        assert counts == {"bandai_namco": 60, "avatargovr": 1, "motionmatching": 0, "reactidle": 0}
 
 
 def test_glob_matching_nothing_names_source_and_glob(data):

@@ -69,7 +69,11 @@ def synthetic_collection(n_sources: int = 6, frames: int = 160) -> list[tuple[st
 
 @pytest.fixture(scope="module")
 def params():
-    return load_params()
+    """The repository's params with the paper's world pose input (the closed forms below)."""
+    params = load_params()
+    return dataclasses.replace(
+        params, features=dataclasses.replace(params.features, pose_input="world")
+    )
 
 
 def test_layout_sizes_and_windows(params):

@@ -363,6 +363,30 @@ def test_metrics_for_file_and_collection(robot, tmp_path):
         metrics_for_file(tmp_path / "missing.h5", robot, PARAMS)
 
 
+def test_errors_inside_a_file_name_the_file_and_the_group(robot, tmp_path):
+    bad = line_trajectory(robot)
+    bad.time[5] = bad.time[4]  # raised deep in the metrics, about the trajectory
+    single = tmp_path / "one.h5"
+    write_trajectory(single, bad)
+    with pytest.raises(PimannError, match=rf"^{single} \(frame 5\): .*not strictly increasing"):
+        metrics_for_file(single, robot, PARAMS)
+    collection = tmp_path / "many.h5"
+    write_collection(collection, [("good", line_trajectory(robot)), ("bad", bad)])
+    with pytest.raises(PimannError, match=rf"^{collection} \(frame 5\): group 'bad': "):
+        metrics_for_file(collection, robot, PARAMS)
+
+
+def test_about_names_the_outer_file_and_keeps_the_frame():
+    from pimann.errors import about
+
+    with pytest.raises(PimannError) as caught, about("run.h5", "simulate run x"):
+        raise PimannError(None, "DCM/ZMP plan not solved", frame=3)
+    assert str(caught.value) == "run.h5 (frame 3): simulate run x: DCM/ZMP plan not solved"
+    with pytest.raises(PimannError) as caught, about("outer.h5"):
+        raise PimannError("inner.bvh", "truncated")
+    assert str(caught.value) == "outer.h5: truncated [inner.bvh]"
+
+
 def test_bad_time_is_named(robot):
     trajectory = line_trajectory(robot)
     trajectory.time[5] = trajectory.time[4]

@@ -50,7 +50,50 @@ def test_wrong_type_is_named(tmp_path, raw):
 
 def test_unknown_skeleton_is_named(tmp_path, raw):
     raw["data"]["sources"]["reactidle"]["skeleton"] = "cmu"
-    with pytest.raises(PimannError, match="unknown skeleton 'cmu' in data.sources.reactidle"):
+    with pytest.raises(
+        PimannError, match="data.sources.reactidle.skeleton: unknown 'cmu'; known: auto"
+    ):
+        load_params(_write(tmp_path, raw))
+
+
+def _set(raw: dict, dotted: str, value) -> None:
+    *parents, leaf = dotted.split(".")
+    node = raw
+    for part in parents:
+        node = node[int(part)] if isinstance(node, list) else node[part]
+    if isinstance(node, list):
+        node[int(leaf)] = value
+    else:
+        node[leaf] = value
+
+
+@pytest.mark.parametrize(
+    ("dotted", "value", "message"),
+    [
+        ("train.batch_size", 0, r"train.batch_size must be >= 1, not 0"),
+        ("train.epochs", -3, r"train.epochs must be >= 1, not -3"),
+        ("features.test_fraction", 1.5, r"features.test_fraction must be in \(0, 1\), not 1.5"),
+        ("retarget.contact_height", float("nan"), r"retarget.contact_height must be a finite"),
+        ("model.dropout", 1.0, r"model.dropout must be in \[0, 1\), not 1.0"),
+        ("simulate.kp_arms", -1.0, r"simulate.kp_arms must be > 0"),
+        ("rollout.scenarios.forward.0.duration", 0.0, r"scenarios.forward.0.duration must be > 0"),
+        (
+            "rollout.scenario_names.1",
+            "backwards",
+            r"rollout.scenario_names\[1\]: unknown 'backwards'; known: backward, forward",
+        ),
+        ("simulate.runs.0.model", "w7", r"simulate.runs\[0\].model: unknown 'w7'; known: w0, w1"),
+        ("simulate.runs.0.seed", 9, r"simulate.runs\[0\].seed: unknown 9"),
+        ("figures.pi_weight", 7, r"figures.pi_weight: unknown 7.0; known: 0.0, 1.0"),
+        ("figures.box_weights.1", 3, r"figures.box_weights\[1\]: unknown 3.0"),
+        ("evaluate.contact_off_height", 0.01, r"contact_off_height must be >= evaluate.contact_on"),
+        ("train.seeds", [0, 0], r"train.seeds must be a non-empty list without repeats"),
+    ],
+)
+def test_bad_values_are_named_with_what_is_allowed(tmp_path, raw, dotted, value, message):
+    raw["profile"] = "paper"
+    _set(raw, dotted, value)
+    with pytest.raises(PimannError, match=message):
         load_params(_write(tmp_path, raw))
 
 

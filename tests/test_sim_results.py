@@ -189,3 +189,32 @@ def test_render_produces_a_file(walk, sim_params, tmp_path, use_mujoco):
     picture = iio.imread(strip)
     assert picture.shape[0] == 120 and picture.shape[1] >= 3 * 160
     assert _picture_has_subject(picture)
+
+
+def test_a_failed_run_is_recorded_and_the_stage_finishes(tmp_path, sim_robot, sim_params):
+    from pimann.params import SimulateRun, load_params
+    from pimann.rollouts import RolloutKey, rollout_path
+    from pimann.sim.runs import simulate_runs
+
+    q0 = standing_pose(sim_robot, sim_params)
+    plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
+    bad = stepping_trajectory(sim_robot, sim_params, plan, 25.0)
+    bad.contacts = None  # footsteps cannot be extracted: the run fails
+    rollouts = tmp_path / "rollouts"
+    runs = [SimulateRun("w10", seed, "forward", True, False) for seed in (0, 1)]
+    for run in runs:
+        path = rollout_path(rollouts, RolloutKey(run.model, run.seed, run.scenario, run.steering))
+        path.parent.mkdir(parents=True)
+        write_trajectory(path, bad)
+    params = load_params()
+    params = dataclasses.replace(params, simulate=dataclasses.replace(sim_params, runs=runs))
+    summary_path = tmp_path / "summary.json"
+    record = simulate_runs(rollouts, tmp_path / "sim", summary_path, params)
+    assert record["failed_runs"] == ["w10-0-forward-steering", "w10-1-forward-steering"]
+    failure = record["runs"]["w10-0-forward-steering"]
+    assert failure["success"] is False
+    assert failure["failed"].startswith(str(rollouts / "w10" / "0" / "forward-steering.h5"))
+    assert "simulate run w10-0-forward-steering" in failure["failed"]
+    assert "contacts" in failure["failed"]
+    assert json.loads(summary_path.read_text())["failed_runs"] == record["failed_runs"]
+    assert (tmp_path / "sim").is_dir() and not list((tmp_path / "sim").iterdir())

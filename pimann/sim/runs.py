@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from pimann.atomic import atomic_path, write_text_atomic
-from pimann.errors import PimannError
+from pimann.errors import PimannError, about
 from pimann.params import Params, SimulateRun, as_dict
 from pimann.paths import REPO_ROOT
 from pimann.rollouts import STEERING_LABEL, RolloutKey, rollout_path
@@ -65,11 +65,18 @@ def simulate_runs(
         tmp.mkdir()
         for k, (run, path) in enumerate(jobs):
             name = run_name(run)
-            trajectory = read_trajectory(path)
-            log.info("[%d/%d] %s: %.1f s generated", k + 1, len(jobs), name, trajectory.time[-1])
-            result = simulate_trajectory(trajectory, sim)
             provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
                           "steering": run.steering, "rollout": _relative(path)}  # fmt: skip
+            try:
+                with about(path, f"simulate run {name}"):
+                    trajectory = read_trajectory(path)
+                    log.info("[%d/%d] %s: %.1f s generated", k + 1, len(jobs), name,
+                             trajectory.time[-1])  # fmt: skip
+                    result = simulate_trajectory(trajectory, sim)
+            except PimannError as error:  # recorded, the other runs go on
+                log.warning("%s", error)
+                runs[name] = {**provenance, "success": False, "failed": str(error)}
+                continue
             summary = write_simulation(
                 tmp / f"{name}.h5", result, sim, source=_relative(path),
                 rate_hz=sim.output_rate_hz, attrs=provenance,
@@ -88,7 +95,11 @@ def simulate_runs(
                     height=sim.video_height,
                 )  # fmt: skip
             runs[name] = {**provenance, **summary}
-    record = {"profile": params.profile, "runs": runs, "params": {"simulate": as_dict(sim)}}
+    failed = sorted(name for name, run in runs.items() if "failed" in run)
+    if failed:
+        log.warning("%d of %d runs failed: %s", len(failed), len(runs), ", ".join(failed))
+    record = {"profile": params.profile, "failed_runs": failed, "runs": runs,
+              "params": {"simulate": as_dict(sim)}}  # fmt: skip
     record = _json_ready(record)
     write_text_atomic(summary_path, json.dumps(record, indent=2) + "\n")
     return record

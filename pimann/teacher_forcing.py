@@ -1,0 +1,108 @@
+"""Teacher-forced response per motion class: does a trained model predict the data's velocity?
+
+Fed the data's own inputs, a model's first output sample (the base velocity at the current
+step, in the base frame) should match the data's. Where it does and a rollout still fails,
+the rollout loop is the cause (how it starts, what it feeds back); where it does not, the
+training is. Run after `dvc repro` (it reads models/ and data/features):
+
+    python -m pimann.teacher_forcing [--models models] [--samples 20000]
+
+prints, per model seed and motion class (pimann.motion_classes of the sample's frame), the
+mean true and predicted forward and lateral base velocity and the least-squares slope of the
+prediction on the truth (1: follows the data; 0: ignores it).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from pimann.features import read_dataset
+from pimann.motion_classes import CLASSES, motion_classes
+from pimann.params import load_params
+from pimann.paths import REPO_ROOT
+from pimann.rollouts import model_seeds
+from pimann.trajectory import iter_collection
+
+OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
+
+
+def sample_classes(collection: Path, clips: list[str], origin: np.ndarray) -> np.ndarray:
+    """(N,) motion class name of each sample's frame (origin: clip index, step)."""
+    by_name = {name: motion_classes(t) for name, t in iter_collection(collection)}
+    return np.array([CLASSES[by_name[clips[c]][step]] for c, step in origin])
+
+
+def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
+    centred = truth - truth.mean()
+    denominator = float(centred @ centred)
+    return float(centred @ (prediction - prediction.mean())) / denominator if denominator else 0.0
+
+
+def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
+    """One row per model seed, split (train subset / test) and motion class."""
+    from pimann.train import load_model
+
+    rows = []
+    cache: dict[str, tuple] = {}
+    for seed, folder in model_seeds(models_dir).items():
+        model, layout, stats, meta = load_model(folder)
+        dataset_path = Path(meta["dataset"])
+        if str(dataset_path) not in cache:
+            dataset = read_dataset(dataset_path)
+            take = np.linspace(0, len(dataset.x_train) - 1, min(samples, len(dataset.x_train)))
+            take = take.astype(int)
+            parts = {
+                "train": (dataset.x_train[take], dataset.y_train[take], dataset.train_origin[take]),
+                "test": (dataset.x_test, dataset.y_test, dataset.test_origin),
+            }
+            classes = {
+                split: sample_classes(collection, dataset.clips, origin)
+                for split, (_, _, origin) in parts.items()
+            }
+            cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes)
+        names, parts, classes = cache[str(dataset_path)]
+        columns = [names.index(name) for name in OUTPUTS]
+        for split, (x, y, _) in parts.items():
+            with torch.no_grad():
+                predicted = model(torch.as_tensor(x, dtype=torch.float32)).numpy()
+            truth = y[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
+            prediction = predicted[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
+            for name in CLASSES:
+                mask = classes[split] == name
+                if mask.sum() < 50:
+                    continue
+                rows.append({
+                    "model": models_dir.name, "seed": seed, "split": split, "class": name,
+                    "samples": int(mask.sum()),
+                    "vx_true": truth[mask, 0].mean(), "vx_pred": prediction[mask, 0].mean(),
+                    "vy_true": truth[mask, 1].mean(), "vy_pred": prediction[mask, 1].mean(),
+                    "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
+                    "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]),
+                })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models")
+    parser.add_argument("--samples", type=int, default=20000, help="training samples used")
+    args = parser.parse_args(argv)
+    collection = REPO_ROOT / load_params().features.input
+    frames = [
+        class_response(folder, collection, args.samples)
+        for folder in sorted(p for p in args.models.iterdir() if p.is_dir())
+        if any(folder.glob("*/meta.json"))
+    ]
+    table = pd.concat(frames, ignore_index=True)
+    with pd.option_context("display.width", 160, "display.max_rows", 500):
+        print(table.round(2).to_string(index=False))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
