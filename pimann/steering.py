@@ -74,22 +74,31 @@ def steer(
         frame[..., 0, 0] = frame[..., 1, 1] = np.cos(yaw)
         frame[..., 1, 0], frame[..., 0, 1] = np.sin(yaw), -np.sin(yaw)
         frame[..., 2, 2] = 1.0
-    linear = np.einsum("...ji,...j->...i", frame, position_error)  # R^T (p - p_d)
+    linear = (position_error[..., None, :] @ frame)[..., 0, :]  # R^T (p - p_d)
     relative = np.swapaxes(np.asarray(R_desired, dtype=float), -1, -2) @ R  # R_d^T R
-    angular = vee(skew_part(relative))
-    return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - k1 * angular
+    angular = np.empty(relative.shape[:-1])  # vee(skew_part(R_d^T R)), without the matrices
+    angular[..., 0] = relative[..., 2, 1] - relative[..., 1, 2]
+    angular[..., 1] = relative[..., 0, 2] - relative[..., 2, 0]
+    angular[..., 2] = relative[..., 1, 0] - relative[..., 0, 1]
+    return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - (0.5 * k1) * angular
 
 
-def rotation_rpy(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll): e.g. a desired orientation from a commanded heading."""
+def rotation_rpy(
+    roll: float | np.ndarray = 0.0, pitch: float | np.ndarray = 0.0, yaw: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll): e.g. a desired orientation from a commanded heading.
+
+    Angles broadcast: (...) -> (..., 3, 3), so a batch of rollouts gets its rotations at once.
+    """
+    angles = (np.asarray(a, dtype=float) for a in (roll, pitch, yaw))
+    roll, pitch, yaw = np.broadcast_arrays(*angles)
     cr, sr, cp, sp, cy, sy = (f(a) for a in (roll, pitch, yaw) for f in (np.cos, np.sin))
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
+    rows = (
+        (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+        (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+        (-sp, cp * sr, cp * cr),
     )
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def goal_from_command(
