@@ -27,10 +27,9 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pimann.batch_generate import SECTIONS, RolloutSpec, generate_batch
 from pimann.command_script import scenario_steps
 from pimann.features import Normalisation, window_layout
-from pimann.generate import generate_rollout
+from pimann.generate import SECTIONS, RolloutSpec, generate_batch, generate_rollout
 from pimann.mann import MANN
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT

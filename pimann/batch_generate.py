@@ -5,9 +5,10 @@ evaluated for one sample at a time is mostly overhead: a batch of B rows (each i
 script and steering switch) costs one network call, one vectorised leg-odometry pass
 (pimann.leg_odometry), one Schmitt-trigger update and one steering correction per step,
 with no Python loop over rows inside a step. The rules are pimann.generate's (its module
-docstring); each row keeps its own state (stopped, stop blend, goal, path, restart), and a
-single rollout (`pimann.generate.generate_rollout`) is a batch of one, so a row of a batch
-equals the same rollout alone (float64: to rounding).
+docstring); each row keeps its own state (stopped, stop blend, goal, path, restart).
+`pimann.generate.generate_batch` drives a `BatchGenerator` over the rows' scripts and a single
+rollout (`generate_rollout`) is a batch of one, so a row of a batch equals the same rollout
+alone (float64: to rounding).
 
 Rows end at different steps: a row past its script's end is held still (stopped) and its
 frames are not kept; the network is evaluated on the walking rows only.
@@ -15,48 +16,22 @@ frames are not kept; the network is evaluated on the walking rows only.
 
 from __future__ import annotations
 
-import dataclasses
 import time
-from collections.abc import Sequence
 
 import numpy as np
 import torch
-from scipy.spatial.transform import Rotation
-from tqdm import tqdm
 
-from pimann.command_script import ScriptSteps, Segment
 from pimann.contacts import SchmittTrigger
 from pimann.errors import PimannError
 from pimann.features import FeatureLayout, Normalisation
 from pimann.leg_odometry import Odometry
-from pimann.params import EvaluateParams, RolloutParams, load_params
-from pimann.robot import Robot, load_robot
-from pimann.rotations import exp_so3, roll_pitch, rot_z, yaw_of, yaw_only
+from pimann.params import EvaluateParams, RolloutParams
+from pimann.robot import Robot
+from pimann.rotations import rot_z, yaw_of, yaw_only
 from pimann.standing import StandingPose
-from pimann.steering import goal_from_command, rotation_rpy, steer
-from pimann.trajectory import Trajectory
+from pimann.steering import exp_so3, goal_from_command, roll_pitch, rotation_rpy, steer
 
 SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
-
-
-@dataclasses.dataclass
-class Rollout:
-    """A generated trajectory plus what the generator decided at each frame (for checks)."""
-
-    trajectory: Trajectory
-    goals: np.ndarray  # (T, 3) the goal p_d at each frame (NaN before the first command)
-    stopped: np.ndarray  # (T,) bool: standing still or returning to the standing pose
-    support: np.ndarray  # (T,) int: 0 left, 1 right (column of `FEET`)
-
-
-@dataclasses.dataclass(frozen=True)
-class RolloutSpec:
-    """One row of a batch: its command script, steering switch, and the trajectory's labels."""
-
-    script: Sequence[Segment]
-    steering: bool
-    source: str = "generated"
-    attrs: dict | None = None
 
 
 def _interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:
@@ -373,69 +348,3 @@ class BatchGenerator:
         own = np.broadcast_to(own, self.yaw.shape)[:, None]
         self.fed_position = np.where(own, self.position, self.y[:, self.ys["base_position"]])
         self.fed_rpy = np.where(own, own_rpy, self.y[:, self.ys["base_rpy"]])
-
-
-def generate_batch(
-    model: torch.nn.Module,
-    layout: FeatureLayout,
-    stats: Normalisation,
-    specs: Sequence[RolloutSpec],
-    params: RolloutParams,
-    robot: Robot | None = None,
-    *,
-    contact_params: EvaluateParams | None = None,
-    standing: StandingPose | None = None,
-    progress: str | None = None,
-    timings: dict[str, float] | None = None,
-) -> list[Rollout]:
-    """Roll the network out over every row's script at once; one `Rollout` per row, in order.
-
-    `standing`: the pose to start from and return to (default: the robot's nominal one);
-    `progress`: a tqdm bar over the steps with this label; `timings`: seconds per section of
-    the step (`SECTIONS`, "record") are added to it.
-    """
-    if not specs:
-        return []
-    plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
-    generator = BatchGenerator(
-        model, layout, stats, params, np.array([spec.steering for spec in specs]),
-        robot or load_robot(), contact_params or load_params().evaluate,
-        standing or StandingPose.nominal(),
-    )  # fmt: skip
-    names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
-             "foot")  # fmt: skip
-    n = len(plan.active)
-    out = {name: np.empty((n, *np.shape(getattr(generator, name))),
-                          dtype=np.asarray(getattr(generator, name)).dtype)
-           for name in names}  # fmt: skip
-    recording = 0.0
-    with torch.inference_mode():
-        for k in tqdm(range(n), desc=progress, disable=True if progress is None else None):
-            if k > 0:
-                generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
-                               plan.changed[k], plan.active[k])  # fmt: skip
-            clock = time.perf_counter()
-            for name in names:
-                out[name][k] = getattr(generator, name)
-            recording += time.perf_counter() - clock
-    if timings is not None:
-        for section, seconds in [*generator.timings.items(), ("record", recording)]:
-            timings[section] = timings.get(section, 0.0) + seconds
-
-    rollouts = []
-    for row, spec in enumerate(specs):
-        kept = {name: np.ascontiguousarray(values[: plan.lengths[row] + 1, row])
-                for name, values in out.items()}  # fmt: skip
-        trajectory = Trajectory(
-            time=np.arange(len(kept["position"])) * generator.dt,
-            base_position=kept["position"],
-            base_quaternion_xyzw=Rotation.from_matrix(kept["rotation"]).as_quat(),  # x y z w
-            joint_positions=kept["joints"],
-            source=spec.source,
-            rate_hz=float(layout.rate_hz),
-            contacts=kept["contacts"],
-            joint_velocities=kept["joint_velocities"],
-            attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
-        )
-        rollouts.append(Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"]))
-    return rollouts

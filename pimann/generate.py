@@ -60,18 +60,21 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import time
 from collections.abc import Iterator, Sequence
 from pathlib import Path
 
+import numpy as np
 import torch
+from scipy.spatial.transform import Rotation
+from tqdm import tqdm
 
 from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
-    Rollout,
-    RolloutSpec,
+    SECTIONS,
+    BatchGenerator,
     _interpolation,
-    generate_batch,
 )
-from pimann.command_script import Command, scenario_steps  # noqa: F401  (their old home)
+from pimann.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
 from pimann.errors import PimannError
 from pimann.features import FeatureLayout, Normalisation
 from pimann.params import (
@@ -91,6 +94,92 @@ log = logging.getLogger(__name__)
 
 Segment = MotionSegment | StandSegment
 BATCH_SIZE = 64  # rollouts generated together by `generate_files` (more: chunks)
+
+
+@dataclasses.dataclass
+class Rollout:
+    """A generated trajectory plus what the generator decided at each frame (for checks)."""
+
+    trajectory: Trajectory
+    goals: np.ndarray  # (T, 3) the goal p_d at each frame (NaN before the first command)
+    stopped: np.ndarray  # (T,) bool: standing still or returning to the standing pose
+    support: np.ndarray  # (T,) int: 0 left, 1 right (column of `FEET`)
+
+
+@dataclasses.dataclass(frozen=True)
+class RolloutSpec:
+    """One row of a batch: its command script, steering switch, and the trajectory's labels."""
+
+    script: Sequence[Segment]
+    steering: bool
+    source: str = "generated"
+    attrs: dict | None = None
+
+
+def generate_batch(
+    model: torch.nn.Module,
+    layout: FeatureLayout,
+    stats: Normalisation,
+    specs: Sequence[RolloutSpec],
+    params: RolloutParams,
+    robot: Robot | None = None,
+    *,
+    contact_params: EvaluateParams | None = None,
+    standing: StandingPose | None = None,
+    progress: str | None = None,
+    timings: dict[str, float] | None = None,
+) -> list[Rollout]:
+    """Roll the network out over every row's script at once; one `Rollout` per row, in order.
+
+    `standing`: the pose to start from and return to (default: the robot's nominal one);
+    `progress`: a tqdm bar over the steps with this label; `timings`: seconds per section of
+    the step (`SECTIONS`, "record") are added to it.
+    """
+    if not specs:
+        return []
+    plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
+    generator = BatchGenerator(
+        model, layout, stats, params, np.array([spec.steering for spec in specs]),
+        robot or load_robot(), contact_params or load_params().evaluate,
+        standing or StandingPose.nominal(),
+    )  # fmt: skip
+    names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
+             "foot")  # fmt: skip
+    n = len(plan.active)
+    out = {name: np.empty((n, *np.shape(getattr(generator, name))),
+                          dtype=np.asarray(getattr(generator, name)).dtype)
+           for name in names}  # fmt: skip
+    recording = 0.0
+    with torch.inference_mode():
+        for k in tqdm(range(n), desc=progress, disable=True if progress is None else None):
+            if k > 0:
+                generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
+                               plan.changed[k], plan.active[k])  # fmt: skip
+            clock = time.perf_counter()
+            for name in names:
+                out[name][k] = getattr(generator, name)
+            recording += time.perf_counter() - clock
+    if timings is not None:
+        for section, seconds in [*generator.timings.items(), ("record", recording)]:
+            timings[section] = timings.get(section, 0.0) + seconds
+
+    rollouts = []
+    for row, spec in enumerate(specs):
+        kept = {name: np.ascontiguousarray(values[: plan.lengths[row] + 1, row])
+                for name, values in out.items()}  # fmt: skip
+        trajectory = Trajectory(
+            time=np.arange(len(kept["position"])) * generator.dt,
+            base_position=kept["position"],
+            base_quaternion_xyzw=Rotation.from_matrix(kept["rotation"]).as_quat(),  # x y z w
+            joint_positions=kept["joints"],
+            source=spec.source,
+            rate_hz=float(layout.rate_hz),
+            contacts=kept["contacts"],
+            joint_velocities=kept["joint_velocities"],
+            attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
+        )
+        rollouts.append(Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"]))
+    return rollouts
 
 
 def generate_rollout(

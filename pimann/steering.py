@@ -123,3 +123,24 @@ def reached_goal(p: np.ndarray, p_goal: np.ndarray, radius: float = 0.3) -> np.n
     )
     result = distance <= radius
     return bool(result) if np.ndim(result) == 0 else result
+
+
+def roll_pitch(rotation: np.ndarray) -> np.ndarray:
+    """(B, 2) roll and pitch of rotations (B, 3, 3), as pimann.features.matrix_to_rpy: the
+    inverse of `rotation_rpy` but for yaw (generation's stop blend and fed-back pose)."""
+    roll = np.arctan2(rotation[:, 2, 1], rotation[:, 2, 2])
+    pitch = np.arctan2(-rotation[:, 2, 0], np.hypot(rotation[:, 0, 0], rotation[:, 1, 0]))
+    return np.stack([roll, pitch], axis=1)
+
+
+def exp_so3(omega: np.ndarray) -> np.ndarray:
+    """exp([w]x) of rotation vectors (B, 3): I + (sin t / t) [w]x + ((1 - cos t) / t^2) [w]x^2,
+    t = |w|, the second factor as (sin(t/2) / (t/2))^2 / 2; 1e-300 added to t keeps t = 0 exact.
+    Generation integrates the base orientation of every rollout of a batch with it."""
+    theta = np.sqrt((omega * omega).sum(axis=1)) + 1e-300
+    half = 0.5 * theta
+    a, b = np.sin(theta) / theta, np.sin(half) / half
+    skew = np.zeros((len(omega), 3, 3))
+    skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0] = omega[:, 0], omega[:, 1], omega[:, 2]
+    skew[:, 1, 2], skew[:, 2, 0], skew[:, 0, 1] = -omega[:, 0], -omega[:, 1], -omega[:, 2]
+    return np.eye(3) + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)

@@ -14,10 +14,9 @@ import pytest
 import torch
 from test_generate import IDENTITY, LAYOUT, GaitModel
 
-from pimann.batch_generate import RolloutSpec, generate_batch
 from pimann.contacts import FEET
 from pimann.features import Normalisation, clip_features
-from pimann.generate import generate_rollout
+from pimann.generate import RolloutSpec, generate_batch, generate_rollout
 from pimann.leg_odometry import SoleFrames
 from pimann.mann import MANN
 from pimann.params import ModelParams, MotionSegment, StandSegment
