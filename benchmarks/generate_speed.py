@@ -1,66 +1,168 @@
-"""Speed of autoregressive generation with a full-size MANN (random weights), 500 steps.
+"""Where generation's time goes, and batched generation against one rollout at a time.
 
-Prints steps per second and the real-time factor (generated seconds per wall-clock second,
-50 Hz) with and without steering, and the share of the time spent in the network itself.
-Run from the repository root: python -m benchmarks.generate_speed
+A full-size MANN (random weights, the layout of `features.window_layout`), 50 Hz:
+
+1. the cost of a batch step by section (commands and state, network input, network, steering,
+   leg odometry, contacts, recording; writing the files apart) for one rollout and for batches
+   of 8, 32 and 128 10-s rollouts (half of them steered), the cost of one 10-s rollout
+   amortised over its batch and its real-time factor;
+2. a full set, 2 seeds x (5 named scenarios + 12 clip scripts) x 2 steering, generated one
+   rollout at a time (`generate_rollout`) and batched (one batch per seed, as the rollout
+   stage does), side by side in this run, and the ratio.
+
+The clip scripts are the command-following benchmark's (the test clips of `--collection`,
+default the repository's features.input) or, without the collection, 12 random scripts of
+4-16 s. Run from the repository root: python -m benchmarks.generate_speed
 """
 
 from __future__ import annotations
 
+import argparse
+import dataclasses
+import os
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
 
+from pimann.command_script import scenario_steps
 from pimann.features import Normalisation, window_layout
-from pimann.generate import generate
+from pimann.generate import SECTIONS, RolloutSpec, generate_batch, generate_rollout
 from pimann.mann import MANN
-from pimann.params import MotionSegment, load_params
+from pimann.params import MotionSegment, StandSegment, load_params
+from pimann.paths import REPO_ROOT
 from pimann.robot import STANDING_BASE_HEIGHT, STANDING_JOINTS, load_robot
+from pimann.rollouts import benchmark_scripts
+from pimann.trajectory import write_trajectory
 
-STEPS = 500
+SECONDS = 10.0
+N_CLIPS = 12
 
 
-def main() -> None:
-    params = load_params()
-    layout = window_layout(params.features, 50.0, "full")
-    torch.manual_seed(0)
-    model = MANN(layout.input_dim, layout.output_dim, params.model, seeds=[0]).eval()
-    # outputs near the standing state, so the random network's rollout stays sane
+def random_model(params, layout, seed: int) -> MANN:
+    torch.manual_seed(seed)
+    return MANN(layout.input_dim, layout.output_dim, params.model, seeds=[seed]).eval()
+
+
+def near_standing(layout) -> Normalisation:
+    """Outputs near the standing state, so a random network's rollout stays sane."""
     y_mean = np.zeros(layout.output_dim)
     y_mean[layout.y_slices["joints"]] = STANDING_JOINTS
     y_mean[layout.y_slices["base_position"].start + 2] = STANDING_BASE_HEIGHT
-    stats = Normalisation(
+    return Normalisation(
         np.zeros(layout.input_dim), np.ones(layout.input_dim), y_mean,
         np.full(layout.output_dim, 0.01),
     )  # fmt: skip
-    scenario = [MotionSegment(STEPS / layout.rate_hz, 0.5, 0.0, 0.0)]
-    robot = load_robot()
 
-    x = torch.zeros(1, layout.input_dim)
-    with torch.inference_mode():
-        model(x)
+
+def clip_scripts(params, collection: Path | None) -> tuple[list[list], str]:
+    """12 scripts of the command-following benchmark, or random ones of its kind."""
+    if collection is not None and collection.is_file():
+        features = dataclasses.replace(params.features, input=str(collection))
+        scripts = list(benchmark_scripts(dataclasses.replace(params, features=features)).values())
+        if len(scripts) >= N_CLIPS:
+            return scripts[:N_CLIPS], f"the test clips of {collection}"
+    rng = np.random.default_rng(0)
+    scripts = []
+    for _ in range(N_CLIPS):
+        script, total = [], rng.uniform(4.0, 16.0)
+        while sum(s.duration for s in script) < total:
+            duration = float(rng.uniform(0.5, 3.0))
+            if rng.random() < 0.2:
+                script.append(StandSegment(duration, True))
+            else:
+                vx, vy, yaw = rng.uniform([-0.6, -0.2, -0.4], [1.0, 0.2, 0.4])
+                script.append(MotionSegment(duration, float(vx), float(vy), float(yaw)))
+        scripts.append(script)
+    return scripts, "12 random scripts of 4-16 s (no collection)"
+
+
+def sections(model, layout, stats, params, robot, rows: int, steering: list[bool]) -> None:
+    """One line: microseconds per batch step by section; one 10-s rollout's amortised cost."""
+    script = [MotionSegment(SECONDS, 0.8, 0.0, 0.0)]
+    specs = [RolloutSpec(script, steering[i % len(steering)]) for i in range(rows)]
+    best = None
+    for _ in range(2 if rows <= 32 else 1):
+        timings: dict[str, float] = {}
         start = time.perf_counter()
-        for _ in range(STEPS):
-            model(x)
-        network_s = time.perf_counter() - start
-    print(f"network alone        {STEPS / network_s:8.0f} steps/s")
-
-    for steering in (False, True):
-        times = []
-        for _ in range(3):
+        rollouts = generate_batch(
+            model, layout, stats, specs, params.rollout, robot,
+            contact_params=params.evaluate, timings=timings,
+        )  # fmt: skip
+        wall = time.perf_counter() - start
+        with tempfile.TemporaryDirectory() as folder:
             start = time.perf_counter()
-            generate(
-                model, layout, stats, scenario, params.rollout, steering, robot,
-                contact_params=params.evaluate,
-            )  # fmt: skip
-            times.append(time.perf_counter() - start)
-        wall = min(times)
-        print(
-            f"steering={steering!s:5s}       {STEPS / wall:8.0f} steps/s, "
-            f"real-time factor {STEPS / layout.rate_hz / wall:5.1f}x, "
-            f"{wall:.3f} s per 10 s trajectory, network {100 * network_s / wall:.0f}% of it"
-        )
+            for i, rollout in enumerate(rollouts):
+                write_trajectory(Path(folder) / f"{i}.h5", rollout.trajectory)
+            timings["write"] = time.perf_counter() - start
+        if best is None or wall < best[0]:
+            best = wall, timings
+    wall, timings = best
+    steps = int(SECONDS * layout.rate_hz)
+    per_step = [1e6 * timings[name] / steps for name in (*SECTIONS, "record", "write")]
+    label = f"{rows:4d} {'steered' if steering == [True] else ('plain' if rows == 1 else 'half')}"
+    rollout_s = (wall + timings["write"]) / rows
+    print(
+        f"{label:12s}" + "".join(f"{v:9.0f}" for v in per_step)
+        + f"{1e6 * wall / steps:9.0f} {1e6 * wall / steps / rows:8.0f}"
+        + f"{rollout_s:9.3f} s {SECONDS / rollout_s:6.0f}x"
+    )  # fmt: skip
+
+
+def full_set(params, layout, stats, robot, scripts: list[list]) -> None:
+    """2 seeds x scripts x steering: one rollout at a time against one batch per seed."""
+    models = [random_model(params, layout, seed) for seed in (0, 1)]
+    jobs = [(script, steering) for script in scripts for steering in (False, True)]
+    frames = sum(len(scenario_steps(script, layout.rate_hz)) for script, _ in jobs)
+    kwargs = {"contact_params": params.evaluate}
+    start = time.perf_counter()
+    for model in models:
+        for script, steering in jobs:
+            generate_rollout(model, layout, stats, script, params.rollout, steering, robot,
+                             **kwargs)  # fmt: skip
+    alone = time.perf_counter() - start
+    start = time.perf_counter()
+    for model in models:
+        specs = [RolloutSpec(script, steering) for script, steering in jobs]
+        generate_batch(model, layout, stats, specs, params.rollout, robot, **kwargs)
+    batched = time.perf_counter() - start
+    n = len(models) * len(jobs)
+    generated = len(models) * frames / layout.rate_hz
+    print(f"full set: {n} rollouts ({len(models)} seeds x {len(scripts)} scripts x 2 steering), "
+          f"{generated:.0f} s generated")  # fmt: skip
+    for name, wall in (("one at a time", alone), ("batched (one batch per seed)", batched)):
+        print(f"  {name:30s} {wall:7.1f} s, {wall / n:.3f} s a rollout, "
+              f"real-time factor {generated / wall:5.0f}x")  # fmt: skip
+    print(f"  batched is {alone / batched:.1f}x faster")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--collection", type=Path, default=None)
+    args = parser.parse_args()
+    torch.set_num_threads(1)  # as the rollout stage: one process per core
+    params = load_params()
+    layout = window_layout(params.features, 50.0, "full")
+    stats, robot = near_standing(layout), load_robot()
+    model = random_model(params, layout, 0)
+    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, 1 torch thread; "
+          f"MANN {layout.input_dim} -> {layout.output_dim}, {params.model.n_experts} experts, "
+          f"hidden {params.model.prediction_hidden}")  # fmt: skip
+    print(f"\nus per batch step by section; a {SECONDS:.0f}-s rollout ({SECONDS * 50:.0f} steps) "
+          "amortised over its batch (writing included)")  # fmt: skip
+    print(f"{'batch':12s}" + "".join(f"{n:>9s}" for n in (*SECTIONS, "record", "write"))
+          + f"{'step':>9s} {'per row':>8s}{'rollout':>11s} {'RTF':>6s}")  # fmt: skip
+    sections(model, layout, stats, params, robot, 1, [False])
+    sections(model, layout, stats, params, robot, 1, [True])
+    for rows in (8, 32, 128):
+        sections(model, layout, stats, params, robot, rows, [False, True])
+    collection = args.collection or REPO_ROOT / params.features.input
+    scripts, origin = clip_scripts(params, collection)
+    named = [params.rollout.scenarios[name] for name in params.rollout.scenario_names]
+    print(f"\nclip scripts: {origin}")
+    full_set(params, layout, stats, robot, named + scripts)
 
 
 if __name__ == "__main__":

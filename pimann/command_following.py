@@ -17,7 +17,7 @@ blend in its neighbours), its class that of its mean command (`classify`); a sta
 is a stand.
 
 Measures per segment of a rollout (`follow_measures`), frame k of a 50 Hz rollout being the
-state after step k (pimann.generate.scenario_steps: segment i runs from its start state, the
+state after step k (pimann.command_script.scenario_steps: segment i runs from its start state, the
 last frame of segment i - 1, to its last frame):
 - achieved mean planar velocity in the heading frame (per-step displacements rotated by the
   step's mean yaw) and yaw rate over the segment after `settle_s` (default: `SETTLE_FRACTION`
@@ -55,9 +55,9 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from pimann.command_script import scenario_steps
 from pimann.contacts import frame_period
 from pimann.errors import PimannError
-from pimann.generate import scenario_steps
 from pimann.metrics import trajectory_time_series
 from pimann.motion_classes import CLASSES, WINDOW_S, base_motion, classify
 from pimann.params import EvaluateParams, MotionSegment, StandSegment

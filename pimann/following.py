@@ -30,7 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann import command_following as cf
 from pimann.atomic import atomic_path, write_text_atomic
-from pimann.generate import scenario_steps
+from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
 from pimann.params import Params, StandSegment
 from pimann.rollouts import (

@@ -43,23 +43,40 @@ A scenario that ends on a motion command ends walking, as the paper's 10 s test.
 
 The ground-projected baseline (layout variant `ground_projected`) is rolled out in its own
 frame: the base orientation keeps yaw only (roll and pitch 0), as in its training data.
+
+Batches. These rules run in pimann.batch_generate, vectorised over rollouts of one model (one
+network call per step for every walking row, vectorised leg odometry (pimann.leg_odometry),
+contacts and steering; each row its own script, stops and restarts). `generate_rollout` is a
+batch of one, so a rollout alone equals its row of any batch (to rounding: the network's BLAS
+rounds a row differently at other batch sizes, 1e-16 in float64). The rollout stage
+(pimann.rollouts.run_rollouts) generates one batch per seed (`generate_files`). Measured
+(benchmarks/generate_speed.py: full-size MANN, 1 thread, both cores loaded by a training run):
+a 10-s rollout alone 0.40 s (0.46 s steered; the network is ~55% of it, the one-rollout
+generator before cost the same side by side), 0.050 s amortised over a batch of 32 (200x real
+time); a full set of 68 rollouts 4.6x faster batched than one at a time.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import logging
-from collections.abc import Sequence
+import time
+from collections.abc import Iterator, Sequence
 from pathlib import Path
 
 import numpy as np
-import pinocchio as pin
 import torch
 from scipy.spatial.transform import Rotation
+from tqdm import tqdm
 
-from pimann.contacts import FEET, SchmittTrigger
+from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
+    SECTIONS,
+    BatchGenerator,
+    _interpolation,
+)
+from pimann.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
 from pimann.errors import PimannError
-from pimann.features import FeatureLayout, Normalisation, matrix_to_rpy
+from pimann.features import FeatureLayout, Normalisation
 from pimann.params import (
     DEFAULT_PARAMS,
     EvaluateParams,
@@ -69,37 +86,14 @@ from pimann.params import (
     StandSegment,
     load_params,
 )
-from pimann.robot import (
-    N_JOINTS,
-    SOLE_CORNERS,
-    Robot,
-    load_robot,
-)
-from pimann.rotations import yaw_of, yaw_only
+from pimann.robot import Robot, load_robot
 from pimann.standing import StandingPose
-from pimann.steering import goal_from_command, rotation_rpy, steer
 from pimann.trajectory import Trajectory, write_trajectory
 
 log = logging.getLogger(__name__)
 
 Segment = MotionSegment | StandSegment
-
-
-@dataclasses.dataclass(frozen=True)
-class Command:
-    """One segment as the generator reads it: velocity (x, y) and yaw rate, or stand."""
-
-    velocity: np.ndarray  # (2,) m/s in the heading frame (x forward, y left)
-    yaw_rate: float  # rad/s
-    stand: bool
-
-    @classmethod
-    def of(cls, segment: Segment) -> Command:
-        if isinstance(segment, StandSegment):
-            return cls(np.zeros(2), 0.0, True)
-        velocity = np.array([segment.vx, segment.vy], dtype=float)
-        still = not np.any(velocity) and segment.yaw_rate == 0.0
-        return cls(velocity, float(segment.yaw_rate), still)  # a zero command is a stand
+BATCH_SIZE = 64  # rollouts generated together by `generate_files` (more: chunks)
 
 
 @dataclasses.dataclass
@@ -112,290 +106,80 @@ class Rollout:
     support: np.ndarray  # (T,) int: 0 left, 1 right (column of `FEET`)
 
 
-def scenario_steps(scenario: Sequence[Segment], rate_hz: float) -> np.ndarray:
-    """Segment index of each generated step (step k runs from (k-1) dt to k dt)."""
-    if not scenario:
-        raise PimannError(None, "the scenario has no segments")
-    ends = np.cumsum([segment.duration for segment in scenario])
-    if any(segment.duration <= 0 for segment in scenario):
-        raise PimannError(None, "scenario segments must have positive durations")
-    n_steps = int(round(ends[-1] * rate_hz))
-    start_times = np.arange(n_steps) / rate_hz
-    return np.minimum(np.searchsorted(ends, start_times + 0.5 / rate_hz), len(scenario) - 1)
+@dataclasses.dataclass(frozen=True)
+class RolloutSpec:
+    """One row of a batch: its command script, steering switch, and the trajectory's labels."""
+
+    script: Sequence[Segment]
+    steering: bool
+    source: str = "generated"
+    attrs: dict | None = None
 
 
-def _interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:
-    """Matrix M with M @ f(knots) = f(targets), linear between knots, clamped at the ends."""
-    matrix = np.zeros((len(targets), len(knots)))
-    for row, target in enumerate(np.clip(targets, knots[0], knots[-1])):
-        upper = min(int(np.searchsorted(knots, target, side="right")), len(knots) - 1)
-        lower = max(upper - 1, 0)
-        span = knots[upper] - knots[lower]
-        fraction = 0.0 if span == 0 else (target - knots[lower]) / span
-        matrix[row, lower] += 1.0 - fraction
-        matrix[row, upper] += fraction
-    return matrix
+def generate_batch(
+    model: torch.nn.Module,
+    layout: FeatureLayout,
+    stats: Normalisation,
+    specs: Sequence[RolloutSpec],
+    params: RolloutParams,
+    robot: Robot | None = None,
+    *,
+    contact_params: EvaluateParams | None = None,
+    standing: StandingPose | None = None,
+    progress: str | None = None,
+    timings: dict[str, float] | None = None,
+) -> list[Rollout]:
+    """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
+    `standing`: the pose to start from and return to (default: the robot's nominal one);
+    `progress`: a tqdm bar over the steps with this label; `timings`: seconds per section of
+    the step (`SECTIONS`, "record") are added to it.
+    """
+    if not specs:
+        return []
+    plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
+    generator = BatchGenerator(
+        model, layout, stats, params, np.array([spec.steering for spec in specs]),
+        robot or load_robot(), contact_params or load_params().evaluate,
+        standing or StandingPose.nominal(),
+    )  # fmt: skip
+    names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
+             "foot")  # fmt: skip
+    n = len(plan.active)
+    out = {name: np.empty((n, *np.shape(getattr(generator, name))),
+                          dtype=np.asarray(getattr(generator, name)).dtype)
+           for name in names}  # fmt: skip
+    recording = 0.0
+    with torch.inference_mode():
+        for k in tqdm(range(n), desc=progress, disable=True if progress is None else None):
+            if k > 0:
+                generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
+                               plan.changed[k], plan.active[k])  # fmt: skip
+            clock = time.perf_counter()
+            for name in names:
+                out[name][k] = getattr(generator, name)
+            recording += time.perf_counter() - clock
+    if timings is not None:
+        for section, seconds in [*generator.timings.items(), ("record", recording)]:
+            timings[section] = timings.get(section, 0.0) + seconds
 
-class _Odometry:
-    """Leg odometry: the base placed so that the support point stays where it was."""
-
-    def __init__(self, robot: Robot):
-        self.robot = robot
-        self.model = robot.model
-        self.data = robot.model.createData()  # private: the cached Robot's data may be in use
-        self.frame_ids = [robot.frame_id(name) for name in FEET]
-        self.q = robot.configuration(np.zeros(3), [0.0, 0.0, 0.0, 1.0], np.zeros(N_JOINTS))
-        self.corners_h = np.hstack([SOLE_CORNERS, np.ones((len(SOLE_CORNERS), 1))]).T
-        self.support: tuple[int, int] | None = None
-        self.anchor = np.zeros(3)
-        self.world_corners = np.zeros((2, len(SOLE_CORNERS), 3))
-
-    def corners_in_base(self, joints: np.ndarray) -> np.ndarray:
-        """(2, C, 3) sole corners in the base frame, one FK pass over the two sole frames."""
-        self.q[self.robot.q_index] = joints
-        pin.forwardKinematics(self.model, self.data, self.q)
-        out = np.empty_like(self.world_corners)
-        for f, frame_id in enumerate(self.frame_ids):
-            placement = pin.updateFramePlacement(self.model, self.data, frame_id)
-            out[f] = (placement.homogeneous @ self.corners_h)[:3].T
-        return out
-
-    def place(self, rotation: np.ndarray, joints: np.ndarray, first: np.ndarray | None = None):
-        """Base position for orientation `rotation` and `joints`; `first` sets the start pose.
-
-        Returns (base position, lowest corner height of each foot (2,), support foot index).
-        """
-        rotated = self.corners_in_base(joints) @ rotation.T  # (2, C, 3), world-aligned
-        heights = rotated[..., 2]
-        foot = int(np.argmin(heights.min(axis=1)))
-        support = (foot, int(np.argmin(heights[foot])))
-        if first is not None:
-            position = first
-            self.support = support
-            self.anchor = first + rotated[support]
-        else:
-            if support != self.support:  # pin the new support point on the ground
-                self.support = support
-                self.anchor = self.world_corners[support].copy()
-                self.anchor[2] = 0.0
-            position = self.anchor - rotated[support]
-        self.world_corners = rotated + position
-        return position, self.world_corners[..., 2].min(axis=1), foot
-
-
-class _Network:
-    """x (physical units) -> y (physical units) for one sample, without autograd."""
-
-    def __init__(self, model: torch.nn.Module, layout: FeatureLayout, stats: Normalisation):
-        self.model = model.eval()
-        self.parameter = next(model.parameters(), None)
-        self.x_mean, self.x_std = stats.x_mean.astype(float), stats.x_std.astype(float)
-        self.y_mean, self.y_std = stats.y_mean.astype(float), stats.y_std.astype(float)
-        if len(self.x_mean) != layout.input_dim or len(self.y_mean) != layout.output_dim:
-            raise PimannError(None, "normalisation statistics do not match the feature layout")
-
-    def __call__(self, x: np.ndarray) -> np.ndarray:
-        normalised = ((x - self.x_mean) / self.x_std).astype(np.float32)
-        tensor = torch.from_numpy(normalised)[None]
-        if self.parameter is not None:
-            tensor = tensor.to(self.parameter.device, self.parameter.dtype)
-        with torch.inference_mode():
-            y = self.model(tensor)[0].double().cpu().numpy()
-        return y * self.y_std + self.y_mean
-
-
-def _planar(yaw: float, vector: np.ndarray) -> np.ndarray:
-    """A heading-frame (x, y) vector in the world frame."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.array([c * vector[0] - s * vector[1], s * vector[0] + c * vector[1]])
-
-
-class _Generator:
-    """The rollout's state and its per-step rules (module docstring), one call per frame."""
-
-    def __init__(
-        self,
-        model: torch.nn.Module,
-        layout: FeatureLayout,
-        stats: Normalisation,
-        params: RolloutParams,
-        steering: bool,
-        robot: Robot,
-        contact_params: EvaluateParams,
-        standing: StandingPose,
-    ):
-        self.params, self.steering, self.network = params, steering, _Network(model, layout, stats)
-        self.standing_joints = standing.joints.copy()
-        self.dt = 1.0 / float(layout.rate_hz)
-        self.projected = layout.variant == "ground_projected"
-        self.layout, self.xs, self.ys = layout, layout.x_slices, layout.y_slices
-        in_offsets = np.asarray(layout.input_offsets)
-        out_offsets = np.asarray(layout.output_offsets, dtype=float)
-        self.current = layout.current_output
-        self.history_length = max(1, int(-in_offsets.min()) + 1)
-        self.past_offsets = in_offsets[in_offsets <= 0]
-        # velocity at step i + o (o > 0) is the previous prediction's sample at offset o + 1
-        self.future_matrix = _interpolation(in_offsets[in_offsets > 0] + 1.0, out_offsets)
-        self.horizon = out_offsets.max() / layout.rate_hz
-        span = max(out_offsets.max(), 1.0)
-        self.weights = (np.clip(out_offsets / span, 0, 1) ** params.command_blend_tau)[:, None]
-        self.weights[out_offsets <= 0] = 0.0
-        rpy = np.array([*standing.roll_pitch, 0.0])
-        self.standing_rpy = rpy * ([0.0, 0.0, 1.0] if self.projected else 1.0)
-
-        # the robot: standing still
-        self.rotation = rotation_rpy(*self.standing_rpy)
-        self.joints, self.joint_velocities = standing.joints.copy(), np.zeros(len(standing.joints))
-        self.yaw = float(self.standing_rpy[2])  # unwrapped
-        self.odometry = _Odometry(robot)
-        lowest = (self.odometry.corners_in_base(self.joints) @ self.rotation.T)[..., 2].min()
-        self.position, _, self.foot = self.odometry.place(
-            self.rotation, self.joints, first=np.array([0.0, 0.0, -lowest])
-        )  # the lowest sole corner on the floor
-        self.trigger = SchmittTrigger.from_params(contact_params, self.dt, np.array([True, True]))
-        self.contacts = self.trigger.state
-        # the network's side: velocity history (world frame) and corrected future (base frame)
-        self.history = np.zeros((2, self.history_length, 3))
-        self.head = 0  # index of the newest history sample
-        self.future = np.zeros((2, len(out_offsets), 3))
-        self.x = np.zeros(layout.input_dim)
-        self.fed_position, self.fed_rpy = self.position.copy(), self.standing_rpy.copy()
-        # the command side
-        self.goal, self.desired_yaw = np.full(3, np.nan), self.yaw
-        self.desired = self.rotation
-        self.path: np.ndarray | None = None  # the commanded path's point (world frame)
-        self.last_position = self.position
-        self.heading_velocity = np.zeros(2)  # the last motion command's (heading frame)
-        self.stopped, self.stand_since, self.stop_step = True, 0, 0
-        self.stop_from: tuple[np.ndarray, np.ndarray] | None = None
-
-    def command(self, k: int, command: Command, changed: bool) -> None:
-        """Goal, path and desired heading for step k (and a restart after a stop)."""
-        if changed and command.stand:  # the goal freezes at the path's point
-            self.stand_since = k
-            self.goal = (self.position if self.path is None else self.path).copy()
-        elif changed:
-            self.desired_yaw, self.heading_velocity = self.yaw, command.velocity
-            self.path = self.position.copy()
-            if self.stopped:  # restart the network from the standing state
-                self.stopped, self.stop_from = False, None
-                self._start_windows(command)
-                self.fed_position = self.position.copy()
-                self.fed_rpy = np.array([*self.standing_rpy[:2], self.yaw])
-        if not command.stand:  # a held command: the path (and the goal) move with it
-            self.desired_yaw += command.yaw_rate * self.dt
-            direction = _planar(self.desired_yaw, command.velocity)
-            if self.params.held_command == "carrot":
-                self.path[:2] += direction * self.dt
-            elif np.any(direction):  # along the commanded direction, as far as the robot went
-                direction /= np.hypot(*direction)
-                moved = self.position[:2] - self.last_position[:2]
-                self.path[:2] += direction * (direction @ moved)
-        self.last_position = self.position
-        self.desired = rotation_rpy(*self.standing_rpy[:2], self.desired_yaw)
-        if not command.stand:
-            self.goal = self.path.copy()
-            if self.params.held_command == "carrot":
-                displacement = command.velocity * self.horizon
-                self.goal = goal_from_command(
-                    self.path, self.desired, displacement, self.params.goal_factor
-                )
-        elif not self.stopped and self._stop_now(k):
-            self.stopped, self.stop_step = True, k
-            self.stop_from = (self.joints.copy(), self.rotation.copy())
-
-    def _start_windows(self, command: Command) -> None:
-        """Velocity windows at a start: zero (standing) or the command held (`start_history`)."""
-        self.history[:] = 0.0
-        self.future[:] = 0.0
-        if self.params.start_history == "command":
-            linear = np.array([*_planar(yaw_of(self.rotation), command.velocity), 0.0])
-            self.history[0], self.history[1, :, 2] = linear, command.yaw_rate
-            self.future[0] = linear @ self.rotation  # R^T v
-            self.future[1] = self.rotation[2] * command.yaw_rate
-
-    def _stop_now(self, k: int) -> bool:
-        """Under 'stand': at once without steering; at, or past, the goal with it."""
-        offset = self.position[:2] - self.goal[:2]
-        close = np.hypot(*offset) <= self.params.goal_radius
-        passed = np.any(self.heading_velocity) and (
-            offset @ _planar(self.desired_yaw, self.heading_velocity) >= 0
+    rollouts = []
+    for row, spec in enumerate(specs):
+        kept = {name: np.ascontiguousarray(values[: plan.lengths[row] + 1, row])
+                for name, values in out.items()}  # fmt: skip
+        trajectory = Trajectory(
+            time=np.arange(len(kept["position"])) * generator.dt,
+            base_position=kept["position"],
+            base_quaternion_xyzw=Rotation.from_matrix(kept["rotation"]).as_quat(),  # x y z w
+            joint_positions=kept["joints"],
+            source=spec.source,
+            rate_hz=float(layout.rate_hz),
+            contacts=kept["contacts"],
+            joint_velocities=kept["joint_velocities"],
+            attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
         )
-        late = (k - self.stand_since) * self.dt >= self.params.stop_timeout_s
-        return not self.steering or close or passed or late
-
-    def _standing(self, k: int) -> np.ndarray:
-        """Joints and base roll/pitch blend to the standing pose; the new base orientation."""
-        if self.stop_from is None:
-            self.joint_velocities = np.zeros_like(self.joints)
-            return self.rotation
-        blend = max(self.params.stop_blend_s, self.dt)
-        alpha = min(1.0, (k - self.stop_step + 1) * self.dt / blend)
-        from_joints, from_rotation = self.stop_from
-        joints = (1 - alpha) * from_joints + alpha * self.standing_joints
-        if alpha >= 1.0:
-            joints = self.standing_joints.copy()
-        roll_pitch = (1 - alpha) * matrix_to_rpy(from_rotation[None])[0, :2]
-        roll_pitch += alpha * self.standing_rpy[:2]
-        self.joint_velocities = (joints - self.joints) / self.dt
-        self.joints = joints
-        return rotation_rpy(*roll_pitch, yaw_of(self.rotation))
-
-    def _walking(self, command: Command) -> np.ndarray:
-        """One network step: input, prediction, blend, steering; the new base orientation."""
-        xs, ys, rotation = self.xs, self.ys, self.rotation
-        taken = (self.head + self.past_offsets) % self.history_length
-        for block, history, future in (
-            ("base_linear_window", self.history[0], self.future[0]),
-            ("base_angular_window", self.history[1], self.future[1]),
-        ):  # history rows v -> R^T v, the current base frame
-            self.x[xs[block]] = np.concatenate(
-                [history[taken] @ rotation, self.future_matrix @ future]
-            ).ravel()
-        self.x[xs["joints"]], self.x[xs["joint_velocities"]] = self.joints, self.joint_velocities
-        fed = self.layout.pose(self.fed_position, self.fed_rpy)
-        self.x[xs["base_position"]], self.x[xs["base_rpy"]] = fed
-        self.y = y = self.network(self.x)
-
-        command_world = np.array([*_planar(yaw_of(rotation), command.velocity), 0.0])
-        command_linear = command_world @ rotation  # R^T v
-        command_angular = rotation[2] * command.yaw_rate  # R^T [0, 0, yaw rate]
-        weights = self.weights
-        linear = y[ys["base_linear_future"]].reshape(-1, 3)
-        angular = y[ys["base_angular_future"]].reshape(-1, 3)
-        linear = (1 - weights) * linear + weights * command_linear
-        angular = (1 - weights) * angular + weights * command_angular
-        if self.steering:
-            linear, angular = steer(
-                linear, angular, self.position, rotation, self.goal, self.desired,
-                self.params.k0, self.params.k1, planar=self.params.planar_steering,
-            )  # fmt: skip
-        self.future[0], self.future[1] = linear, angular
-        self.head = (self.head + 1) % self.history_length
-        self.history[0, self.head] = rotation @ linear[self.current]
-        self.history[1, self.head] = rotation @ angular[self.current]
-        self.joints = y[ys["joints"]].copy()
-        self.joint_velocities = y[ys["joint_velocities"]].copy()
-        new_rotation = rotation @ pin.exp3(angular[self.current] * self.dt)
-        return yaw_only(new_rotation[None])[0] if self.projected else new_rotation
-
-    def step(self, k: int, command: Command, changed: bool) -> None:
-        """Frame k from frame k - 1 under `command` (`changed`: it starts at this step)."""
-        self.command(k, command, changed)
-        rotation = self._standing(k) if self.stopped else self._walking(command)
-        turn = yaw_of(rotation) - yaw_of(self.rotation)
-        self.yaw += float(np.arctan2(np.sin(turn), np.cos(turn)))
-        self.rotation = rotation
-        self.position, heights, self.foot = self.odometry.place(rotation, self.joints)
-        self.contacts = self.trigger.update(heights)
-        if self.stopped or self.params.pose_feedback == "generated":
-            self.fed_position = self.position.copy()
-            self.fed_rpy = np.array([*matrix_to_rpy(rotation[None])[0, :2], self.yaw])
-        else:
-            ys = self.ys
-            self.fed_position = self.y[ys["base_position"]].copy()
-            self.fed_rpy = self.y[ys["base_rpy"]].copy()
+        rollouts.append(Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"]))
+    return rollouts
 
 
 def generate_rollout(
@@ -414,45 +198,14 @@ def generate_rollout(
 ) -> Rollout:
     """Roll the network out over `scenario`; see the module docstring for every rule.
 
-    `standing`: the pose to start from and return to (default: the robot's nominal one).
+    A batch of one (pimann.batch_generate.generate_batch): the same trajectory as its row of
+    any batch. `standing`: the pose to start from and return to (default: the nominal one).
     """
-    step_segment = scenario_steps(scenario, float(layout.rate_hz))
-    commands = [Command.of(segment) for segment in scenario]
-    generator = _Generator(
-        model, layout, stats, params, steering, robot or load_robot(),
-        contact_params or load_params().evaluate, standing or StandingPose.nominal(),
-    )  # fmt: skip
-    n = len(step_segment) + 1
-    out = {
-        "position": np.empty((n, 3)),
-        "rotation": np.empty((n, 3, 3)),
-        "joints": np.empty((n, N_JOINTS)),
-        "joint_velocities": np.empty((n, N_JOINTS)),
-        "contacts": np.empty((n, 2), dtype=bool),
-        "goal": np.empty((n, 3)),
-        "stopped": np.empty(n, dtype=bool),
-        "foot": np.empty(n, dtype=int),
-    }
-    for k in range(n):
-        if k > 0:
-            segment = step_segment[k - 1]
-            changed = k == 1 or segment != step_segment[k - 2]
-            generator.step(k, commands[segment], changed)
-        for name, values in out.items():
-            values[k] = getattr(generator, name)
-
-    trajectory = Trajectory(
-        time=np.arange(n) * generator.dt,
-        base_position=out["position"],
-        base_quaternion_xyzw=Rotation.from_matrix(out["rotation"]).as_quat(),  # x y z w
-        joint_positions=out["joints"],
-        source=source,
-        rate_hz=float(layout.rate_hz),
-        contacts=out["contacts"],
-        joint_velocities=out["joint_velocities"],
-        attrs={"steering": bool(steering), **(attrs or {})},
-    )
-    return Rollout(trajectory, out["goal"], out["stopped"], out["foot"])
+    spec = RolloutSpec(list(scenario), bool(steering), source, attrs)
+    return generate_batch(
+        model, layout, stats, [spec], params, robot,
+        contact_params=contact_params, standing=standing,
+    )[0]  # fmt: skip
 
 
 def generate(
@@ -481,6 +234,75 @@ def scenario_of(params: RolloutParams, name: str, params_path: str | Path = DEFA
     return params.scenarios[name]
 
 
+@dataclasses.dataclass(frozen=True)
+class FileJob:
+    """One rollout file of a model: its scenario name, script, steering switch and path."""
+
+    scenario: str
+    script: Sequence[Segment]
+    steering: bool
+    output: Path
+
+
+def _model_rollouts(
+    model_dir: str | Path,
+    jobs: Sequence[FileJob],
+    params: Params,
+    batch_size: int = BATCH_SIZE,
+    progress: str | None = None,
+) -> Iterator[tuple[FileJob, Trajectory]]:
+    """The trajectories of `jobs` with one trained model, `batch_size` rollouts at a time.
+
+    Attributes as the files have always had them: scenario, model_dir, script, pi_weight,
+    seed, variant, start_pose, steering.
+    """
+    from pimann.rollouts import SCRIPT_ATTR, script_json
+    from pimann.train import load_model
+
+    model, layout, stats, meta = load_model(model_dir)
+    standing = StandingPose.nominal()
+    if params.rollout.start_pose == "data":
+        standing = StandingPose.from_json(meta.get("standing"))
+    model_attrs = {
+        key: meta[key] for key in ("pi_weight", "seed", "variant") if meta.get(key) is not None
+    }
+    rate = float(layout.rate_hz)
+    ordered = sorted(jobs, key=lambda job: -len(scenario_steps(job.script, rate)))  # alike lengths
+    robot = load_robot()
+    for first in range(0, len(ordered), batch_size):
+        chunk = ordered[first : first + batch_size]
+        specs = [
+            RolloutSpec(
+                list(job.script), job.steering, f"{model_dir}:{job.scenario}",
+                {"scenario": job.scenario, "model_dir": str(model_dir),
+                 SCRIPT_ATTR: script_json(job.script), **model_attrs,
+                 "start_pose": standing.origin},
+            )
+            for job in chunk
+        ]  # fmt: skip
+        rollouts = generate_batch(
+            model, layout, stats, specs, params.rollout, robot,
+            contact_params=params.evaluate, standing=standing, progress=progress,
+        )  # fmt: skip
+        yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
+
+
+def generate_files(
+    model_dir: str | Path,
+    jobs: Sequence[FileJob],
+    params: Params,
+    batch_size: int = BATCH_SIZE,
+    progress: str | None = None,
+) -> list[Path]:
+    """Every job's rollout of one model, generated in batches, each file written atomically."""
+    written = []
+    for job, trajectory in _model_rollouts(model_dir, jobs, params, batch_size, progress):
+        write_trajectory(job.output, trajectory)
+        written.append(Path(job.output))
+    log.info("wrote %d rollouts of %s", len(written), model_dir)
+    return written
+
+
 def generate_file(
     model_dir: str | Path,
     scenario_name: str,
@@ -495,29 +317,13 @@ def generate_file(
     `segments`: the script to run under the name `scenario_name` (default: that scenario of
     rollout.scenarios); recorded in the file's attrs["script"] (pimann.rollouts.script_json).
     """
-    from pimann.rollouts import SCRIPT_ATTR, script_json
-    from pimann.train import load_model
-
     params = params or load_params(params_path)
     if segments is None:
         scenario = scenario_of(params.rollout, scenario_name, params_path)
     else:
         scenario = list(segments)
-    model, layout, stats, meta = load_model(model_dir)
-    attrs = {"scenario": scenario_name, "model_dir": str(model_dir)}
-    attrs[SCRIPT_ATTR] = script_json(scenario)
-    for key in ("pi_weight", "seed", "variant"):
-        if meta.get(key) is not None:
-            attrs[key] = meta[key]
-    standing = StandingPose.nominal()
-    if params.rollout.start_pose == "data":
-        standing = StandingPose.from_json(meta.get("standing"))
-    attrs["start_pose"] = standing.origin
-    trajectory = generate(
-        model, layout, stats, scenario, params.rollout, steering, load_robot(),
-        contact_params=params.evaluate, source=f"{model_dir}:{scenario_name}", attrs=attrs,
-        standing=standing,
-    )  # fmt: skip
+    job = FileJob(scenario_name, scenario, bool(steering), Path(output_path))
+    ((_, trajectory),) = _model_rollouts(model_dir, [job], params)
     write_trajectory(output_path, trajectory)
     log.info("wrote %s (%d frames, steering %s)", output_path, len(trajectory), steering)
     return trajectory

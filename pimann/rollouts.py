@@ -200,15 +200,17 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
     return record
 
 
-def _generate(job: tuple[Path, str, Path, bool, Params, list[Segment]]) -> Path:
+def _generate_seed(job: tuple[Path, list[tuple[str, list[Segment], bool, Path]], Params]) -> int:
+    """One seed's rollouts, generated together in batches (pimann.generate.generate_files)."""
     import torch
 
-    from pimann.generate import generate_file
+    from pimann.generate import FileJob, generate_files
 
     torch.set_num_threads(1)  # one process per core
-    model_dir, scenario, output, steering, params, script = job
-    generate_file(model_dir, scenario, output, steering, params, segments=script)
-    return output
+    model_dir, files, params = job
+    jobs = [FileJob(*file) for file in files]
+    progress = f"{model_dir.parent.name}/{model_dir.name} steps"
+    return len(generate_files(model_dir, jobs, params, progress=progress))
 
 
 def rollout_scripts(params: Params) -> dict[str, list[Segment]]:
@@ -234,7 +236,9 @@ def run_rollouts(
     """Every seed of one training output x every script of `rollout_scripts` (the named
     scenarios and the benchmark clips), with and without steering.
 
-    Written into `out_dir` (= results/rollouts/<model>) as a whole, atomically.
+    One job per seed (`workers` processes): its scripts x steering advance together as one
+    batch (pimann.batch_generate). Written into `out_dir` (= results/rollouts/<model>) as a
+    whole, atomically.
     """
     models_dir, out_dir = Path(models_dir), Path(out_dir)
     seeds = model_seeds(models_dir)
@@ -246,16 +250,14 @@ def run_rollouts(
     }
     with atomic_path(out_dir) as tmp:
         jobs = [
-            (folder, sc, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)), st, params,
-             script)
+            (folder, [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)))
+                      for sc, script in scripts.items() for st in (False, True)], params)
             for seed, folder in seeds.items()
-            for sc, script in scripts.items()
-            for st in (False, True)
         ]  # fmt: skip
         tmp.mkdir()
         for seed in seeds:
             (tmp / str(seed)).mkdir()
-        pool_map(_generate, jobs, workers, f"rollouts {out_dir.name}")
+        pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name} (seeds)")
         (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return sorted(out_dir.glob("*/*.h5"))
 

@@ -74,22 +74,31 @@ def steer(
         frame[..., 0, 0] = frame[..., 1, 1] = np.cos(yaw)
         frame[..., 1, 0], frame[..., 0, 1] = np.sin(yaw), -np.sin(yaw)
         frame[..., 2, 2] = 1.0
-    linear = np.einsum("...ji,...j->...i", frame, position_error)  # R^T (p - p_d)
+    linear = (position_error[..., None, :] @ frame)[..., 0, :]  # R^T (p - p_d)
     relative = np.swapaxes(np.asarray(R_desired, dtype=float), -1, -2) @ R  # R_d^T R
-    angular = vee(skew_part(relative))
-    return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - k1 * angular
+    angular = np.empty(relative.shape[:-1])  # vee(skew_part(R_d^T R)), without the matrices
+    angular[..., 0] = relative[..., 2, 1] - relative[..., 1, 2]
+    angular[..., 1] = relative[..., 0, 2] - relative[..., 2, 0]
+    angular[..., 2] = relative[..., 1, 0] - relative[..., 0, 1]
+    return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - (0.5 * k1) * angular
 
 
-def rotation_rpy(roll: float = 0.0, pitch: float = 0.0, yaw: float = 0.0) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll): e.g. a desired orientation from a commanded heading."""
+def rotation_rpy(
+    roll: float | np.ndarray = 0.0, pitch: float | np.ndarray = 0.0, yaw: float | np.ndarray = 0.0
+) -> np.ndarray:
+    """R = Rz(yaw) Ry(pitch) Rx(roll): e.g. a desired orientation from a commanded heading.
+
+    Angles broadcast: (...) -> (..., 3, 3), so a batch of rollouts gets its rotations at once.
+    """
+    angles = (np.asarray(a, dtype=float) for a in (roll, pitch, yaw))
+    roll, pitch, yaw = np.broadcast_arrays(*angles)
     cr, sr, cp, sp, cy, sy = (f(a) for a in (roll, pitch, yaw) for f in (np.cos, np.sin))
-    return np.array(
-        [
-            [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
-            [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
-            [-sp, cp * sr, cp * cr],
-        ]
+    rows = (
+        (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
+        (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
+        (-sp, cp * sr, cp * cr),
     )
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def goal_from_command(
@@ -114,3 +123,24 @@ def reached_goal(p: np.ndarray, p_goal: np.ndarray, radius: float = 0.3) -> np.n
     )
     result = distance <= radius
     return bool(result) if np.ndim(result) == 0 else result
+
+
+def roll_pitch(rotation: np.ndarray) -> np.ndarray:
+    """(B, 2) roll and pitch of rotations (B, 3, 3), as pimann.features.matrix_to_rpy: the
+    inverse of `rotation_rpy` but for yaw (generation's stop blend and fed-back pose)."""
+    roll = np.arctan2(rotation[:, 2, 1], rotation[:, 2, 2])
+    pitch = np.arctan2(-rotation[:, 2, 0], np.hypot(rotation[:, 0, 0], rotation[:, 1, 0]))
+    return np.stack([roll, pitch], axis=1)
+
+
+def exp_so3(omega: np.ndarray) -> np.ndarray:
+    """exp([w]x) of rotation vectors (B, 3): I + (sin t / t) [w]x + ((1 - cos t) / t^2) [w]x^2,
+    t = |w|, the second factor as (sin(t/2) / (t/2))^2 / 2; 1e-300 added to t keeps t = 0 exact.
+    Generation integrates the base orientation of every rollout of a batch with it."""
+    theta = np.sqrt((omega * omega).sum(axis=1)) + 1e-300
+    half = 0.5 * theta
+    a, b = np.sin(theta) / theta, np.sin(half) / half
+    skew = np.zeros((len(omega), 3, 3))
+    skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0] = omega[:, 0], omega[:, 1], omega[:, 2]
+    skew[:, 1, 2], skew[:, 2, 0], skew[:, 0, 1] = -omega[:, 0], -omega[:, 1], -omega[:, 2]
+    return np.eye(3) + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)

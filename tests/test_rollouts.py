@@ -9,6 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pandas as pd
 import pytest
 from test_data_reference import walking_clip
@@ -141,3 +142,46 @@ def test_rollout_users_import_the_layout_from_rollouts():
         assert not _imports(path) & set(EVALUATION), path
     assert "pimann.rollouts" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
     assert "pimann.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
+
+
+def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
+    """One batch per seed (scripts x steering): each file as `pimann generate` writes it."""
+    from test_evaluate import _tiny_models
+
+    from pimann.generate import generate_file
+    from pimann.rollouts import run_rollouts
+    from pimann.trajectory import read_trajectory
+
+    params = load_params()
+    params = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(
+            params.rollout,
+            scenarios={
+                "short": [MotionSegment(0.6, 0.5, 0.0, 0.0)],
+                "stop": [
+                    MotionSegment(0.4, 0.4, 0.0, 0.2),
+                    StandSegment(0.6, True),
+                    MotionSegment(0.3, 0.3, 0.0, 0.0),
+                ],
+            },  # fmt: skip
+            scenario_names=["short", "stop"],
+            benchmark_clips=False,
+        ),
+    )
+    _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
+    written = run_rollouts(tmp_path / "models" / "w10", tmp_path / "w10", params, workers=1)
+    assert len(written) == 2 * 2 * 2 and (tmp_path / "w10" / "models.json").is_file()
+    for key in (RolloutKey("w10", 1, "stop", True), RolloutKey("w10", 0, "short", False)):
+        batched = read_trajectory(rollout_path(tmp_path, key))
+        alone = generate_file(
+            tmp_path / "models" / "w10" / str(key.seed), key.scenario, tmp_path / "alone.h5",
+            key.steering, params,
+        )  # fmt: skip
+        alone = read_trajectory(tmp_path / "alone.h5")
+        assert batched.attrs == alone.attrs and batched.source == alone.source
+        assert read_script(batched) == params.rollout.scenarios[key.scenario]
+        assert len(batched) == len(alone) == {"short": 31, "stop": 66}[key.scenario]
+        for name in ("base_position", "joint_positions", "joint_velocities"):
+            np.testing.assert_allclose(getattr(batched, name), getattr(alone, name), atol=1e-5)
+        np.testing.assert_array_equal(batched.contacts, alone.contacts)

@@ -1,0 +1,127 @@
+"""Batched generation (pimann.batch_generate): a row of a batch is the same rollout alone.
+
+Float64 models (the analytic gait of test_generate and a tiny trained MANN), so the only
+difference a batch could make is rounding; rows with different scripts (stand segments
+between motions: stops and restarts), lengths and steering share one batch.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+from test_generate import IDENTITY, LAYOUT, GaitModel
+
+from pimann.contacts import FEET
+from pimann.features import Normalisation, clip_features
+from pimann.generate import RolloutSpec, generate_batch, generate_rollout
+from pimann.leg_odometry import SoleFrames
+from pimann.mann import MANN
+from pimann.params import ModelParams, MotionSegment, StandSegment
+
+M, S = MotionSegment, StandSegment
+SCRIPTS = [
+    [S(0.3, True), M(1.5, 0.5, 0.0, 0.2), S(1.0, True), M(1.0, -0.3, 0.1, 0.0)],  # stop, restart
+    [M(2.5, 0.6, 0.0, 0.0)],  # ends walking
+    [M(0.8, 0.3, 0.2, -0.3), S(1.5, True)],  # ends standing
+    [S(0.5, True), M(1.2, 0.4, 0.0, 0.0)],
+]
+
+
+def test_sole_frames_match_pinocchio(robot, rng):
+    joints = rng.uniform(robot.joint_lower, robot.joint_upper, size=(6, 26))
+    positions, rotations = SoleFrames(robot)(joints)
+    for row, values in enumerate(joints):
+        q = robot.configuration(np.zeros(3), [0.0, 0.0, 0.0, 1.0], values)
+        for column, frame in enumerate(FEET):
+            placement = robot.frame_placement(q, frame)
+            np.testing.assert_allclose(positions[row, column], placement.translation, atol=1e-12)
+            np.testing.assert_allclose(rotations[row, column], placement.rotation, atol=1e-12)
+
+
+def assert_same_rollout(alone, row) -> None:
+    a, b = alone.trajectory, row.trajectory
+    assert len(a) == len(b) and a.attrs == b.attrs and a.source == b.source
+    for name in ("base_position", "base_quaternion_xyzw", "joint_positions", "joint_velocities"):
+        np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(b.contacts, a.contacts)
+    np.testing.assert_allclose(row.goals, alone.goals, rtol=0, atol=1e-9)  # NaN at frame 0
+    np.testing.assert_array_equal(row.stopped, alone.stopped)
+    np.testing.assert_array_equal(row.support, alone.support)
+
+
+def batch_against_alone(model, stats, params, robot, scripts=SCRIPTS, **changes) -> list:
+    """Every script with and without steering in one batch; each row against its rollout."""
+    rollout_params = dataclasses.replace(params.rollout, **changes)
+    pairs = [(script, steering) for steering in (False, True) for script in scripts]
+    specs = [RolloutSpec(s, st, f"row{i}", {"row": i}) for i, (s, st) in enumerate(pairs)]
+    rows = generate_batch(
+        model, LAYOUT, stats, specs, rollout_params, robot, contact_params=params.evaluate
+    )
+    for spec, row in zip(specs, rows, strict=True):
+        alone = generate_rollout(
+            model, LAYOUT, stats, spec.script, rollout_params, spec.steering, robot,
+            contact_params=params.evaluate, source=spec.source, attrs=spec.attrs,
+        )  # fmt: skip
+        assert_same_rollout(alone, row)
+    return rows
+
+
+@pytest.fixture(scope="module")
+def params():
+    from pimann.params import load_params
+
+    return load_params()
+
+
+@pytest.mark.parametrize("held", ["progress", "carrot"])
+def test_gait_rows_equal_their_rollouts_alone(robot, params, held):
+    model = GaitModel(robot, bias=(0.02, 0.05)).double()
+    rows = batch_against_alone(model, IDENTITY, params, robot, held_command=held)
+    assert [len(r.trajectory) for r in rows[:4]] == [191, 126, 116, 86]
+    stops = np.diff(rows[0].stopped.astype(int))
+    assert np.flatnonzero(stops)[0] == 15  # walks from frame 16
+    assert (stops == 1).sum() == 1 and (stops == -1).sum() == 2  # stopped, then restarted
+    for steered in (rows[0], rows[4]):
+        assert not steered.stopped[-1]  # walking again at the end
+    assert rows[2].stopped[-1] and rows[6].stopped[-1]
+    moved = [np.abs(r.trajectory.base_position[-1, :2]).max() for r in rows]
+    assert min(moved) > 0.2  # every row walked
+
+
+def test_trained_mann_rows_equal_their_rollouts_alone(robot, params):
+    """A MANN trained on the gait's forward walk with a stop, rolled out in its range (a badly
+    fitted model diverges chaotically, where BLAS rounding that depends on the batch size,
+    1e-16, grows without bound: a model's flaw, not the batch's)."""
+    torch.set_num_threads(1)
+    walk = M(3.0, 0.5, 0.0, 0.0)
+    data = generate_rollout(
+        GaitModel(robot), LAYOUT, IDENTITY, [walk, S(1.5, True), walk], params.rollout, True,
+        robot, contact_params=params.evaluate,
+    ).trajectory  # fmt: skip
+    x, y, _ = clip_features(data, LAYOUT)
+    stats = Normalisation.fit(x, y)
+    xn = torch.tensor(stats.normalise_x(x), dtype=torch.float64)
+    yn = torch.tensor(stats.normalise_y(y), dtype=torch.float64)
+    torch.manual_seed(0)
+    model = MANN(LAYOUT.input_dim, LAYOUT.output_dim, ModelParams(2, 8, 2, 32, 2, 0.0, "elu"),
+                 seeds=[0]).double()  # fmt: skip
+    optimiser = torch.optim.Adam(model.parameters(), lr=3e-3)
+    for _ in range(300):
+        optimiser.zero_grad()
+        loss = torch.mean((model(xn) - yn) ** 2)
+        loss.backward()
+        optimiser.step()
+    assert loss.item() < 0.01
+    scripts = [
+        [S(0.3, True), M(1.5, 0.5, 0.0, 0.0), S(1.0, True), M(1.0, 0.5, 0.0, 0.0)],
+        [M(2.5, 0.5, 0.0, 0.0)],
+        [M(0.8, 0.5, 0.0, 0.0), S(1.5, True)],
+        [S(0.5, True), M(1.2, 0.4, 0.0, 0.0)],
+    ]
+    rows = batch_against_alone(model.eval(), stats, params, robot, scripts)
+    for row in (rows[0], rows[4]):  # walks at 16, stops during the 'stand', walks again
+        changes = np.flatnonzero(np.diff(row.stopped.astype(int)))
+        assert len(changes) == 3 and changes[0] == 15
