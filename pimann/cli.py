@@ -14,7 +14,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from pimann.errors import PimannError
+from pimann.errors import PimannError, about
 from pimann.logs import quiet_third_party
 
 EXIT_BAD_INPUT = 2
@@ -58,9 +58,18 @@ def cmd_retarget(args: argparse.Namespace) -> None:
     write_trajectory(args.output, trajectory)
 
 
+def _read_trajectory(args: argparse.Namespace):
+    """The input trajectory; its errors name the file (a reader may name the clip's source)."""
+    from pimann.trajectory import read_trajectory
+
+    with about(args.file):
+        return read_trajectory(args.file, args.group)
+
+
 def cmd_render(args: argparse.Namespace) -> None:
     from pimann.render import render_file
 
+    _read_trajectory(args)  # bad input named by its file before any drawing
     skeleton = _skeleton(args) if args.mocap else None
     options = {
         "strip_frames": args.frames, "strip_columns": args.columns, "frame_rate": args.fps,
@@ -84,10 +93,10 @@ def cmd_generate(args: argparse.Namespace) -> None:
 def cmd_metrics(args: argparse.Namespace) -> None:
     from pimann.metrics import trajectory_metrics
     from pimann.robot import load_robot
-    from pimann.trajectory import read_trajectory
 
-    trajectory = read_trajectory(args.file, args.group)
-    metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
+    trajectory = _read_trajectory(args)
+    with about(args.file):
+        metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
     print(json.dumps(metrics, indent=2))
 
 
@@ -100,7 +109,7 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     params = _params(args).simulate
     if args.video:
         check_video_path(args.video)  # before minutes of simulation, not after
-    trajectory = read_trajectory(args.file, args.group)
+    trajectory = _read_trajectory(args)
     try:
         result = simulate_trajectory(trajectory, params, args.duration)
     except PimannError as error:  # name the file, not the trajectory's `source`
