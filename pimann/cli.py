@@ -1,4 +1,4 @@
-"""The `pimann` command line (ARCHITECTURE Contract 2).
+"""The `pimann` command line: mocap, retargeting, rendering, generation, MuJoCo, metrics.
 
 Every subcommand exits 0 on success; on bad input it prints one line naming the file and the
 problem on stderr (no traceback) and exits 2, leaving no partial output (writers are atomic).
@@ -126,26 +126,49 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     print(json.dumps(summary, indent=2))
 
 
+def _global_options(parser: argparse.ArgumentParser, default: object) -> None:
+    """--params and -v, accepted before and after the subcommand."""
+    parser.add_argument(
+        "--params", type=Path, default=default, help="params.yaml (default: the repository's)"
+    )
+    parser.add_argument(
+        "-v", "--verbose", action="store_true", default=default, help="log progress"
+    )
+
+
+def _scenario_names() -> str:
+    """The scenarios of the repository's params.yaml, for the help text."""
+    try:
+        from pimann.params import load_params
+
+        return ", ".join(load_params().rollout.scenarios)
+    except PimannError:
+        return "see rollout.scenarios in params.yaml"
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pimann", description=__doc__.splitlines()[0])
-    parser.add_argument(
-        "--params", type=Path, default=None, help="params.yaml (default: the repo's)"
-    )
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    _global_options(parser, None)
+    parser.set_defaults(verbose=False)
+    after = argparse.ArgumentParser(add_help=False)
+    _global_options(after, argparse.SUPPRESS)  # after the subcommand: override only if given
     sub = parser.add_subparsers(dest="command", required=True)
 
     def add(name: str, handler: Callable, help_text: str) -> argparse.ArgumentParser:
-        command = sub.add_parser(name, help=help_text)
+        command = sub.add_parser(name, help=help_text, description=help_text, parents=[after])
         command.set_defaults(handler=handler)
         return command
 
+    mocap = "a mocap file: XSens .mvnx, XSens YARP log (folder or data.log), or .bvh"
+    trajectory = "a trajectory .h5 (one clip, or a collection with --group)"
+
     info = add("mocap-info", cmd_mocap_info, "format, frames, rate, duration, segments as JSON")
-    info.add_argument("file", type=Path)
+    info.add_argument("file", type=Path, help=mocap)
     info.add_argument("--skeleton", help=SKELETON_HELP)
 
     retarget = add("retarget", cmd_retarget, "retarget one mocap file to a trajectory file")
-    retarget.add_argument("file", type=Path)
-    retarget.add_argument("-o", "--output", type=Path, required=True)
+    retarget.add_argument("file", type=Path, help=mocap)
+    retarget.add_argument("-o", "--output", type=Path, required=True, help="trajectory .h5")
     retarget.add_argument("--mirror", action="store_true", help="mirror across the sagittal plane")
     retarget.add_argument("--skeleton", help=SKELETON_HELP)
     retarget.add_argument(
@@ -153,8 +176,8 @@ def _parser() -> argparse.ArgumentParser:
     )
 
     render = add("render", cmd_render, "draw a trajectory to .gif, .mp4 or a .png strip")
-    render.add_argument("file", type=Path)
-    render.add_argument("-o", "--output", type=Path, required=True)
+    render.add_argument("file", type=Path, help=trajectory)
+    render.add_argument("-o", "--output", type=Path, required=True, help=".png strip, .gif or .mp4")
     render.add_argument("--group", help="clip group inside a collection file")
     render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
     render.add_argument("--skeleton", help=SKELETON_HELP)
@@ -177,22 +200,25 @@ def _parser() -> argparse.ArgumentParser:
     )
 
     generate = add("generate", cmd_generate, "roll a trained model out on one scenario")
-    generate.add_argument("model_dir", type=Path)
     generate.add_argument(
-        "--scenario", required=True, help="a name in params.yaml rollout.scenarios"
+        "model_dir", type=Path, help="a trained model's folder (model.pt, meta.json), e.g. "
+        "models/w10/0"
+    )  # fmt: skip
+    generate.add_argument(
+        "--scenario", required=True, help=f"one of rollout.scenarios: {_scenario_names()}"
     )
-    generate.add_argument("-o", "--output", type=Path, required=True)
+    generate.add_argument("-o", "--output", type=Path, required=True, help="trajectory .h5")
     generate.add_argument("--no-steering", action="store_true", help="no control-informed steering")
 
     simulate = add("simulate", cmd_simulate, "walk a trajectory in MuJoCo (offline controller)")
-    simulate.add_argument("file", type=Path)
+    simulate.add_argument("file", type=Path, help=trajectory)
     simulate.add_argument("-o", "--output", type=Path, required=True, help="result .h5")
     simulate.add_argument("--group", help="clip group inside a collection file")
     simulate.add_argument("--video", type=Path, help=".mp4, .gif or .png strip of the walk")
     simulate.add_argument("--duration", type=float, help="simulate at most this many seconds")
 
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
-    metrics.add_argument("file", type=Path)
+    metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")
     metrics.add_argument("--group", help="clip group inside a collection file")
     return parser
 
