@@ -237,9 +237,13 @@ def write_timeseries(
 def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[str, Any]:
     """Profile and params of the results, with what the trained models recorded."""
     models: dict[str, Any] = {}
+    failed: dict[str, Any] = {}  # {model: {seed: error}} of the rollout stage's failures
     if rollouts_dir is not None:
         for path in sorted(Path(rollouts_dir).glob(f"*/{MODELS_FILE}")):
-            models[path.parent.name] = json.loads(path.read_text())["seeds"]
+            record = json.loads(path.read_text())
+            models[path.parent.name] = record["seeds"]
+            if record.get("failed"):
+                failed[path.parent.name] = record["failed"]
     seeds = sorted({int(s) for record in models.values() for s in record})
     seeds_meta = [m for record in models.values() for m in record.values()]
     epochs = sorted({m.get("epochs") for m in seeds_meta if m.get("epochs") is not None})
@@ -256,6 +260,7 @@ def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[s
             name: as_dict(getattr(params, name)) for name in ("rollout", "evaluate", "figures")
         },
         "models": models,
+        "rollout_failures": failed,
     }
 
 

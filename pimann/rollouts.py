@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import logging
 import re
+import shutil
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -38,6 +40,8 @@ if TYPE_CHECKING:
     import pandas as pd
 
     from pimann.trajectory import Trajectory
+
+log = logging.getLogger(__name__)
 
 BASELINE = "baseline"
 MODELS_FILE = "models.json"
@@ -200,8 +204,11 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
     return record
 
 
-def _generate_seed(job: tuple[Path, list[tuple[str, list[Segment], bool, Path]], Params]) -> int:
-    """One seed's rollouts, generated together in batches (pimann.generate.generate_files)."""
+def _generate_seed(
+    job: tuple[Path, list[tuple[str, list[Segment], bool, Path]], Params],
+) -> str | None:
+    """One seed's rollouts, generated together in batches (pimann.generate.generate_files);
+    the error that stopped them (naming the file), or None."""
     import torch
 
     from pimann.generate import FileJob, generate_files
@@ -210,7 +217,11 @@ def _generate_seed(job: tuple[Path, list[tuple[str, list[Segment], bool, Path]],
     model_dir, files, params = job
     jobs = [FileJob(*file) for file in files]
     progress = f"{model_dir.parent.name}/{model_dir.name} steps"
-    return len(generate_files(model_dir, jobs, params, progress=progress))
+    try:
+        generate_files(model_dir, jobs, params, progress=progress)
+    except PimannError as error:
+        return str(error)
+    return None
 
 
 def rollout_scripts(params: Params) -> dict[str, list[Segment]]:
@@ -257,7 +268,15 @@ def run_rollouts(
         tmp.mkdir()
         for seed in seeds:
             (tmp / str(seed)).mkdir()
-        pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name} (seeds)")
+        failures = pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name} (seeds)")
+        record["failed"] = {
+            str(seed): error for seed, error in zip(seeds, failures, strict=True) if error
+        }
+        for seed, error in record["failed"].items():  # recorded; the other seeds go on
+            log.warning("rollouts of %s seed %s failed: %s", models_dir.name, seed, error)
+            shutil.rmtree(tmp / seed)  # no half set of a seed's rollouts
+        if len(record["failed"]) == len(seeds):
+            raise PimannError(models_dir, f"every seed failed; first: {failures[0]}")
         (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return sorted(out_dir.glob("*/*.h5"))
 

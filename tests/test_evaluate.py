@@ -179,3 +179,30 @@ def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
     missing = tmp_path / "nope.h5"
     with pytest.raises(PimannError, match="nope.h5: file not found"):
         pool_map(_metrics_job, [(missing, params.evaluate)] * 2, 2, "metrics")
+
+
+def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp_path):
+    from pimann.params import MotionSegment
+
+    short = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(
+            params.rollout, scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]},
+            scenario_names=["short"], benchmark_clips=False,
+        ),
+    )  # fmt: skip
+    models = tmp_path / "models" / "w10"
+    _tiny_models(models, 10.0, "full", [0, 1])
+    broken = models / "1" / "model.pt"
+    broken.write_bytes(broken.read_bytes()[:100])  # truncated
+    out = tmp_path / "rollouts" / "w10"
+    written = run_rollouts(models, out, short, workers=1)
+    assert [p.relative_to(out).parts[0] for p in written] == ["0", "0"]  # short x 2 steering
+    record = json.loads((out / "models.json").read_text())
+    assert list(record["failed"]) == ["1"] and str(broken) in record["failed"]["1"]
+    assert not (out / "1").exists()
+    seed_zero = models / "0" / "model.pt"
+    seed_zero.write_bytes(seed_zero.read_bytes()[:100])
+    with pytest.raises(PimannError, match="every seed failed"):
+        run_rollouts(models, tmp_path / "rollouts" / "again", short, workers=1)
+    assert not (tmp_path / "rollouts" / "again").exists()
