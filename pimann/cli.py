@@ -110,10 +110,8 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     if args.video:
         check_video_path(args.video)  # before minutes of simulation, not after
     trajectory = _read_trajectory(args)
-    try:
+    with about(args.file):  # name the file, not the trajectory's `source`
         result = simulate_trajectory(trajectory, params, args.duration)
-    except PimannError as error:  # name the file, not the trajectory's `source`
-        raise PimannError(args.file, error.problem, frame=error.frame) from None
     summary = write_simulation(
         args.output, result, params, source=str(args.file), rate_hz=params.output_rate_hz
     )

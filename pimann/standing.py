@@ -22,6 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann.motion_classes import CLASSES, motion_classes
 from pimann.robot import STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
+from pimann.steering import roll_pitch
 from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
@@ -32,8 +33,7 @@ STANDING = CLASSES.index("standing")
 
 def _roll_pitch(quaternions_xyzw: np.ndarray) -> np.ndarray:
     """(N, 2) roll and pitch of R = Rz(yaw) Ry(pitch) Rx(roll) (pinocchio's rpy)."""
-    zyx = Rotation.from_quat(quaternions_xyzw).as_euler("ZYX")
-    return zyx[:, [2, 1]]
+    return roll_pitch(Rotation.from_quat(quaternions_xyzw).as_matrix())
 
 
 @dataclasses.dataclass(frozen=True)
