@@ -41,6 +41,7 @@ from pimann.rollouts import (
     find_rollouts,
     is_clip,
     pi_models,
+    rollout_columns,
     rollout_path,
     select_rows,
     weight_label,
@@ -84,54 +85,26 @@ DRIFT_CONDITIONS = ("baseline", "pi", "pi_steering")
 # ----------------------------------------------------------------------------- metrics
 
 
-def _model_info(root: Path, model: str) -> dict[str, Any]:
-    path = root / model / MODELS_FILE
-    try:
-        return json.loads(path.read_text())
-    except FileNotFoundError:
-        raise PimannError(path, "missing: the rollout stage records the models here") from None
-
-
-_WORKER: dict[str, Any] = {}
-
-
 def _metrics_job(job: tuple[Path, Any]) -> dict[str, Any]:
     from pimann.metrics import trajectory_metrics
     from pimann.robot import load_robot
     from pimann.trajectory import read_trajectory
 
     path, evaluate_params = job
-    if "robot" not in _WORKER:
-        _WORKER["robot"] = load_robot("retarget")
-    return trajectory_metrics(read_trajectory(path), _WORKER["robot"], evaluate_params)
+    return trajectory_metrics(read_trajectory(path), load_robot("retarget"), evaluate_params)
 
 
 def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) -> pd.DataFrame:
     """One row per rollout: the key columns, then every `trajectory_metrics` value."""
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
-    infos = {model: _model_info(root, model) for model in {key.model for key, _ in rollouts}}
     results = pool_map(
         _metrics_job, [(path, params.evaluate) for _, path in rollouts], workers, "metrics"
     )
-    rows = []
-    for (key, path), metrics in zip(rollouts, results, strict=True):
-        seed_info = infos[key.model]["seeds"].get(str(key.seed))
-        if seed_info is None:
-            raise PimannError(root / key.model / MODELS_FILE, f"no record of seed {key.seed}")
-        metrics = {k: v for k, v in metrics.items() if k != "source"}
-        rows.append(
-            {
-                "model": key.model,
-                "variant": seed_info["variant"],
-                "pi_weight": seed_info["pi_weight"],
-                "seed": key.seed,
-                "scenario": key.scenario,
-                "steering": key.steering,
-                "rollout": str(path.relative_to(root)),
-                **metrics,
-            }
-        )
+    rows = [
+        {**columns, **{k: v for k, v in metrics.items() if k != "source"}}
+        for columns, metrics in zip(rollout_columns(root, rollouts), results, strict=True)
+    ]
     return sort_rows(pd.DataFrame(rows))
 
 

@@ -33,15 +33,16 @@ from pimann.atomic import atomic_path, write_text_atomic
 from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
 from pimann.params import Params, StandSegment
+from pimann.robot import load_robot
 from pimann.rollouts import (
     BASELINE,
-    MODELS_FILE,
     STEERING_LABEL,
     clip_scenario,
     find_rollouts,
     held_out_clips,
     is_clip,
     read_script,
+    rollout_columns,
 )
 from pimann.rotations import yaw_of
 
@@ -50,16 +51,6 @@ log = logging.getLogger(__name__)
 DATA_MODEL = "data"  # the data's own rows
 KEY_COLUMNS = ["model", "variant", "pi_weight", "seed", "scenario", "steering", "kind"]
 NAME = "command_following"
-
-_WORKER: dict[str, Any] = {}
-
-
-def _robot():
-    from pimann.robot import load_robot
-
-    if "robot" not in _WORKER:
-        _WORKER["robot"] = load_robot("retarget")
-    return _WORKER["robot"]
 
 
 def script_displacement(script: Sequence[cf.Segment], rate_hz: float) -> np.ndarray:
@@ -90,7 +81,7 @@ def _rollout_displacement(trajectory) -> np.ndarray:
 
 def measure(trajectory, script: Sequence[cf.Segment], params: Params) -> list[dict[str, Any]]:
     """`follow_measures` rows of one trajectory, with its and the script's displacement."""
-    rows = cf.follow_measures(trajectory, script, _robot(), params.evaluate)
+    rows = cf.follow_measures(trajectory, script, load_robot("retarget"), params.evaluate)
     achieved = _rollout_displacement(trajectory)
     commanded = script_displacement(script, float(trajectory.rate_hz))
     extra = {
@@ -120,29 +111,18 @@ def collect_following(
 ) -> pd.DataFrame:
     """Every segment row of every rollout, and (`data`: a retargeted collection) the data's
     own rows: its test clips against their own scripts."""
-    import json
 
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
     jobs = [(path, params) for _, path in rollouts]
     results = pool_map(_rollout_job, jobs, workers, "command following")
-    infos: dict[str, dict[str, Any]] = {}
     rows = []
-    for (key, path), measures in zip(rollouts, results, strict=True):
-        if key.model not in infos:
-            infos[key.model] = json.loads((root / key.model / MODELS_FILE).read_text())["seeds"]
-        seed = infos[key.model].get(str(key.seed), {})
-        keys = {
-            "model": key.model,
-            "variant": seed.get("variant"),
-            "pi_weight": seed.get("pi_weight", math.nan),
-            "seed": key.seed,
-            "scenario": key.scenario,
-            "steering": key.steering,
-            "kind": "clip" if is_clip(key.scenario) else "scenario",
-            "rollout": str(path.relative_to(root)),
-        }
-        rows += [{**keys, **row} for row in measures]
+    for (key, _), columns, measures in zip(
+        rollouts, rollout_columns(root, rollouts), results, strict=True
+    ):
+        rollout = columns.pop("rollout")  # "kind" before it, as the data rows have it
+        columns.update(kind="clip" if is_clip(key.scenario) else "scenario", rollout=rollout)
+        rows += [{**columns, **row} for row in measures]
     if data is not None:
         clips = held_out_clips(data, params)
         results = pool_map(_data_job, [(t, params) for _, t in clips], workers, "data following")

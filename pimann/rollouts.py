@@ -187,6 +187,34 @@ def model_seeds(models_dir: str | Path) -> dict[int, Path]:
     return dict(sorted(seeds.items()))
 
 
+def rollout_columns(
+    root: str | Path, rollouts: Sequence[tuple[RolloutKey, Path]]
+) -> list[dict[str, Any]]:
+    """The key columns of each rollout (model, variant, pi_weight, seed, scenario, steering,
+    rollout), with the seed's record from the rollout stage's models.json."""
+    root = Path(root)
+    seeds: dict[str, dict[str, Any]] = {}
+    columns = []
+    for key, path in rollouts:
+        record_path = root / key.model / MODELS_FILE
+        if key.model not in seeds:
+            try:
+                seeds[key.model] = json.loads(record_path.read_text())["seeds"]
+            except FileNotFoundError:
+                raise PimannError(
+                    record_path, "missing: the rollout stage records the models here"
+                ) from None
+        seed = seeds[key.model].get(str(key.seed))
+        if seed is None:
+            raise PimannError(record_path, f"no record of seed {key.seed}")
+        columns.append({
+            "model": key.model, "variant": seed["variant"], "pi_weight": seed["pi_weight"],
+            "seed": key.seed, "scenario": key.scenario, "steering": key.steering,
+            "rollout": str(Path(path).relative_to(root)),
+        })  # fmt: skip
+    return columns
+
+
 def models_record(models_dir: str | Path) -> dict[str, Any]:
     """What the rollouts' provenance keeps of each seed's meta.json."""
     record: dict[str, Any] = {}
