@@ -20,6 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from pimann.errors import PimannError
+from pimann.intervals import true_runs
 from pimann.mocap.bvh import read_bvh
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import DataParams, SkeletonParams, SourceParams
@@ -193,19 +194,16 @@ def pelvis_speed(motion: HumanMotion, window_s: float = SPEED_SMOOTHING_S) -> np
     return np.convolve(padded, np.ones(width) / width, mode="valid")
 
 
-def _runs(flags: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    edges = np.diff(np.concatenate([[0], flags.astype(int), [0]]))
-    return np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-
-
 def pause_centres(motion: HumanMotion) -> np.ndarray:
     """Middle frames of the standing pauses: the pelvis's smoothed horizontal speed below
     PAUSE_SPEED for at least PAUSE_MIN_S."""
     if motion.n_frames < 3:
         return np.empty(0, int)
-    starts, stops = _runs(pelvis_speed(motion) < PAUSE_SPEED)
-    long = motion.time[stops - 1] - motion.time[starts] >= PAUSE_MIN_S
-    return (starts[long] + stops[long]) // 2
+    runs = true_runs(pelvis_speed(motion) < PAUSE_SPEED)
+    return np.array(
+        [(a + b) // 2 for a, b in runs if motion.time[b - 1] - motion.time[a] >= PAUSE_MIN_S],
+        dtype=int,
+    )
 
 
 def walking_spans(motion: HumanMotion, max_speed: float | None) -> list[tuple[int, int]]:
@@ -213,12 +211,8 @@ def walking_spans(motion: HumanMotion, max_speed: float | None) -> list[tuple[in
     (the robot walks; a take's running is left out), each at least MIN_CLIP_S long."""
     if max_speed is None or motion.n_frames < 3:
         return [(0, motion.n_frames)]
-    starts, stops = _runs(pelvis_speed(motion, GAIT_SMOOTHING_S) <= max_speed)
-    return [
-        (int(a), int(b))
-        for a, b in zip(starts, stops, strict=True)
-        if motion.time[b - 1] - motion.time[a] >= MIN_CLIP_S
-    ]
+    runs = true_runs(pelvis_speed(motion, GAIT_SMOOTHING_S) <= max_speed)
+    return [(a, b) for a, b in runs if motion.time[b - 1] - motion.time[a] >= MIN_CLIP_S]
 
 
 def clip_count(duration: float, clip_s: float | None) -> int:

@@ -24,17 +24,12 @@ import dataclasses
 
 import numpy as np
 
+from pimann.intervals import true_runs
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 
 SWING_VERTICAL = 0.2  # share of a swing at each end with no horizontal motion
 DEFAULT_SWING_S = 0.4  # s, a swing's length when a clip has no whole swing to measure
-
-
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) index pairs of the True runs of a 1-D bool array."""
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(int), [0]])))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def hysteresis(
@@ -66,10 +61,10 @@ def debounce(flags: np.ndarray, min_on: int, min_off: int) -> np.ndarray:
     """Gaps shorter than `min_off` frames filled, then runs shorter than `min_on` dropped;
     runs touching the clip's ends are kept (they may be longer outside the clip)."""
     flags = flags.copy()
-    for start, stop in _runs(~flags):
+    for start, stop in true_runs(~flags):
         if stop - start < min_off and start > 0 and stop < len(flags):
             flags[start:stop] = True
-    for start, stop in _runs(flags):
+    for start, stop in true_runs(flags):
         if stop - start < min_on and start > 0 and stop < len(flags):
             flags[start:stop] = False
     return flags
@@ -134,7 +129,7 @@ def plan_soles(
     plan = SolePlan(free.copy(), yaw.copy(), np.full(yaw.shape, params.stance_weight))
     for side in range(2):
         steps = []
-        for start, stop in _runs(contacts[:, side]):
+        for start, stop in true_runs(contacts[:, side]):
             place = np.median(free[start:stop, side, :2], axis=0)
             heading = float(np.median(yaw[start:stop, side]))
             steps.append((start, stop, place, heading))

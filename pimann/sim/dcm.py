@@ -16,6 +16,7 @@ import casadi as ca
 import numpy as np
 
 from pimann.errors import PimannError
+from pimann.intervals import true_runs
 from pimann.params import SimulateParams
 from pimann.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.sim.footsteps import FootstepPlan
@@ -81,8 +82,7 @@ def zmp_reference(plan: FootstepPlan, times: np.ndarray, support: np.ndarray) ->
     ref = np.where(single[:, None], centres[np.arange(len(times)), np.argmax(support, 1)], np.nan)
     double = support.all(axis=1)
     # each double-support run ramps from the previous single-support centre to the next one
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], double.astype(int), [0]])))
-    for start, end in zip(edges[::2], edges[1::2], strict=True):
+    for start, end in true_runs(double):
         mid = centres[start:end].mean(axis=1)
         before = ref[start - 1] if start > 0 else mid[0]
         after = ref[end] if end < len(times) else mid[-1]

@@ -15,6 +15,7 @@ import numpy as np
 import pinocchio as pin
 
 from pimann.errors import PimannError
+from pimann.intervals import true_runs
 from pimann.params import SimulateParams
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, Robot
 from pimann.rotations import rot_z
@@ -145,13 +146,6 @@ def _rescale_footsteps(
     return out
 
 
-def _runs(flags: np.ndarray) -> list[tuple[int, int]]:
-    """[start, end) index ranges where flags is True."""
-    padded = np.concatenate([[False], flags, [False]]).astype(np.int8)
-    edges = np.diff(padded)
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
-
-
 def clean_contacts(
     contacts: np.ndarray, time: np.ndarray, min_contact: float, min_swing: float
 ) -> np.ndarray:
@@ -166,12 +160,12 @@ def clean_contacts(
     for side in (0, 1):
         for value, shortest in ((True, min_contact), (False, min_swing)):  # blips, then lifts
             flags = contacts[:, side] == value
-            for start, end in _runs(flags):
+            for start, end in true_runs(flags):
                 # a lift cut by the clip's end counts too: it would land at once
                 inner = start > 0 and (end < len(flags) or not value)
                 if inner and time[end - 1] - time[start] < shortest:
                     contacts[start:end, side] = not value
-    for start, end in _runs(~contacts.any(axis=1)):
+    for start, end in true_runs(~contacts.any(axis=1)):
         later = contacts[end:]
         first = [np.argmax(later[:, s]) if later[:, s].any() else len(later) for s in (0, 1)]
         contacts[start:end, int(np.argmin(first))] = True
@@ -243,7 +237,7 @@ def extract_footsteps(
     soles = sole_trajectories(robot, trajectory)
     hold = params.zmp_hold_s
     last = robot_time[-1] + hold
-    runs = [_runs(contacts[:, side]) for side in (0, 1)]
+    runs = [true_runs(contacts[:, side]) for side in (0, 1)]
     generated = [
         np.array([[*soles[a:b, side, :2].mean(axis=0), _mean_angle(soles[a:b, side, 2])]
                   for a, b in runs[side]])
