@@ -65,10 +65,14 @@ SOLE_CORNERS = np.array(
     ]
 )
 
+# What each robot variant reads from the shared robots folder: its URDF, and the mesh folder
+# MuJoCo loads with it (pinocchio builds kinematics only and reads no mesh). The DVC stages
+# list these files as deps (tests/test_dvc_deps.py finds every use of these names).
 MODEL_FILES = {
     "retarget": "ergoCubGazeboV1_xsens/ergoCubGazeboV1_xsens.urdf",
     "simulation": "ergoCub/robots/ergoCubGazeboV1_3_minContacts/model.urdf",
 }
+MESH_DIRS = {"simulation": "ergoCub/meshes/simmechanics"}
 
 
 def mirror_joint_name(name: str) -> str:
