@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pimann.rollouts import pi_models, select_rows
+from pimann.rollout_layout import pi_models, select_rows
 
 HOLDS, FAILS, NOT_COMPARABLE = "holds", "does not hold", "not comparable"
 WITHIN_SPREAD, STANDS_STILL = "holds within seed spread", "holds (model stands still)"

@@ -40,7 +40,7 @@ from pimann.claim_rules import (
     stands_still,
 )
 from pimann.params import FiguresParams
-from pimann.rollouts import BASELINE, weight_label
+from pimann.rollout_layout import BASELINE, weight_label
 
 __all__ = [
     "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "PAPER_BASELINE_RMSE", "POSITION",

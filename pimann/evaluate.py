@@ -1,6 +1,6 @@
 """The study's evaluation (SPEC 8): rollouts -> tidy metrics, seed statistics, figure data, claims.
 
-Reads the rollouts (layout: pimann.rollouts) and writes under results/ (`write_results`):
+Reads the rollouts (layout: pimann.rollout_layout) and writes under results/ (`write_results`):
 metrics.csv (one row per rollout: every pimann.metrics value), metrics_summary.json (median,
 IQR, min, max over the seeds; the data's own level of the sliding metrics under
 "data_reference", pimann.data_reference), timeseries/*.csv and claims.md (pimann.claims),
@@ -33,7 +33,7 @@ from pimann.metrics import aggregate
 from pimann.parallel import pool_map
 from pimann.params import FiguresParams, Params, as_dict
 from pimann.paths import REPO_ROOT
-from pimann.rollouts import (
+from pimann.rollout_layout import (
     BASELINE,
     MODELS_FILE,
     STEERING_LABEL,

@@ -20,7 +20,7 @@ from pimann.atomic import atomic_path
 from pimann.errors import PimannError
 from pimann.evaluate import read_metrics
 from pimann.params import FiguresParams
-from pimann.rollouts import pi_models
+from pimann.rollout_layout import pi_models
 
 FORMATS = ("pdf", "png")
 BASELINE_COLOUR = "0.45"

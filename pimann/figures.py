@@ -36,7 +36,7 @@ from pimann.figure_style import (
 )
 from pimann.params import FiguresParams
 from pimann.robot import JOINT_NAMES
-from pimann.rollouts import BASELINE, pi_models, weight_label
+from pimann.rollout_layout import BASELINE, pi_models, weight_label
 
 __all__ = [
     "BASELINE", "BASELINE_COLOUR", "DATA_COLOUR", "FIGURES", "FORMATS", "Results",

@@ -1,7 +1,7 @@
 """The command-following benchmark in the evaluate stage (issue 10): rollouts -> results/
 command_following.csv, command_following.md and command_following.png.
 
-Every rollout (layout: pimann.rollouts) is measured against the script it ran (its
+Every rollout (layout: pimann.rollout_layout) is measured against the script it ran (its
 attrs["script"]) by pimann.command_following.follow_measures, one row per script segment, keyed
 by model, variant, pi_weight, seed, scenario, steering and `kind`: `scenario` (a named scenario
 of rollout.scenarios) or `clip` (the benchmark script of a test clip, `clip_<clip name>`). The
@@ -34,16 +34,16 @@ from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
 from pimann.params import Params, StandSegment
 from pimann.robot import load_robot
-from pimann.rollouts import (
+from pimann.rollout_layout import (
     BASELINE,
     STEERING_LABEL,
     clip_scenario,
     find_rollouts,
-    held_out_clips,
     is_clip,
     read_script,
     rollout_columns,
 )
+from pimann.rollouts import held_out_clips
 from pimann.rotations import yaw_of
 
 log = logging.getLogger(__name__)

@@ -32,7 +32,7 @@ import pandas as pd
 
 from pimann.claims import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD, Claim
 from pimann.params import Params
-from pimann.rollouts import BASELINE, STEERING_LABEL, pi_models, select_rows, weight_label
+from pimann.rollout_layout import BASELINE, STEERING_LABEL, pi_models, select_rows, weight_label
 
 METRICS_FILE = "metrics.json"
 MAX_VALUES = 100  # `dvc metrics show` stays readable

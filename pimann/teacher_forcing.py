@@ -26,7 +26,7 @@ from pimann.features import read_dataset
 from pimann.motion_classes import CLASSES, motion_classes
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
-from pimann.rollouts import model_seeds
+from pimann.rollout_layout import model_seeds
 from pimann.trajectory import iter_collection
 
 OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")

@@ -5,7 +5,7 @@
 rolls out every seed of the training output in every scenario of `rollout.scenario_names`
 and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>),
 with and without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
-the models' meta in <out>/models.json (layout: pimann.rollouts).
+the models' meta in <out>/models.json (layout: pimann.rollout_layout).
 """
 
 from __future__ import annotations

@@ -20,7 +20,7 @@ from pimann.claims import (
     evaluate_claims,
 )
 from pimann.params import load_params
-from pimann.rollouts import BASELINE
+from pimann.rollout_layout import BASELINE
 
 WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
 # seed medians of a study that agrees with the paper

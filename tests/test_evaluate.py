@@ -25,7 +25,8 @@ from pimann.evaluate import (
 )
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
-from pimann.rollouts import BASELINE, read_script, run_rollouts, select_rows
+from pimann.rollout_layout import BASELINE, read_script, select_rows
+from pimann.rollouts import run_rollouts
 from pimann.trajectory import read_trajectory
 
 

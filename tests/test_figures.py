@@ -16,7 +16,7 @@ from pimann.evaluate import provenance, write_results
 from pimann.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
 from pimann.params import load_params
 from pimann.robot import JOINT_NAMES
-from pimann.rollouts import RolloutKey
+from pimann.rollout_layout import RolloutKey
 
 
 @pytest.fixture(scope="module")

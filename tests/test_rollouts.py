@@ -1,5 +1,6 @@
-"""The rollouts' layout (pimann.rollouts): paths, the table's model names, and that the module
-sits beside the generator, apart from the evaluation."""
+"""The rollouts' layout (pimann.rollout_layout) and runner (pimann.rollouts): paths, the
+table's model names, and that both sit apart from the evaluation (the layout also apart from
+the generator)."""
 
 from __future__ import annotations
 
@@ -18,22 +19,21 @@ from pimann.command_following import clip_commands
 from pimann.errors import PimannError
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
-from pimann.rollouts import (
+from pimann.rollout_layout import (
     BASELINE,
     RolloutKey,
-    benchmark_scripts,
     clip_scenario,
     find_rollouts,
     parse_rollout_path,
     pi_models,
     read_script,
     rollout_path,
-    rollout_scripts,
     script_json,
     script_of_json,
     select_rows,
     weight_label,
 )
+from pimann.rollouts import benchmark_scripts, rollout_scripts
 from pimann.trajectory import write_collection
 
 EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
@@ -116,11 +116,16 @@ def test_scripts_round_trip_through_json():
     assert read_script(trajectory) == script
 
 
-def test_rollouts_import_nothing_of_the_evaluation():
-    code = "import sys, pimann.rollouts; print(sorted(m for m in sys.modules if m in %r))"
-    out = subprocess.run(
-        [sys.executable, "-c", code % (EVALUATION,)], capture_output=True, text=True, check=True
-    )
+GENERATION = ("torch", "pimann.generate", "pimann.batch_generate", "pimann.train", "pimann.mann")
+
+
+@pytest.mark.parametrize(
+    "module, forbidden",
+    [("pimann.rollouts", EVALUATION), ("pimann.rollout_layout", EVALUATION + GENERATION)],
+)
+def test_the_layout_imports_neither_generation_nor_evaluation(module, forbidden):
+    code = f"import sys, {module}; print(sorted(m for m in sys.modules if m in {forbidden!r}))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
@@ -131,7 +136,7 @@ def _imports(path: Path) -> set[str]:
     } | {a.name for node in ast.walk(tree) if isinstance(node, ast.Import) for a in node.names}
 
 
-def test_rollout_users_import_the_layout_from_rollouts():
+def test_rollout_users_import_the_layout_not_the_evaluation():
     users = [
         *sorted((REPO_ROOT / "pimann" / "sim").glob("*.py")),
         REPO_ROOT / "pimann" / "cli.py",
@@ -140,7 +145,7 @@ def test_rollout_users_import_the_layout_from_rollouts():
     ]
     for path in users:
         assert not _imports(path) & set(EVALUATION), path
-    assert "pimann.rollouts" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
+    assert "pimann.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
     assert "pimann.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
 
 

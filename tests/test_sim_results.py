@@ -193,7 +193,7 @@ def test_render_produces_a_file(walk, sim_params, tmp_path, use_mujoco):
 
 def test_a_failed_run_is_recorded_and_the_stage_finishes(tmp_path, sim_robot, sim_params):
     from pimann.params import SimulateRun, load_params
-    from pimann.rollouts import RolloutKey, rollout_path
+    from pimann.rollout_layout import RolloutKey, rollout_path
     from pimann.sim.runs import simulate_runs
 
     q0 = standing_pose(sim_robot, sim_params)

@@ -17,7 +17,7 @@ from pimann.atomic import atomic_path, write_text_atomic
 from pimann.errors import PimannError, about
 from pimann.params import Params, SimulateRun, as_dict
 from pimann.paths import REPO_ROOT
-from pimann.rollouts import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
 from pimann.sim.results import write_simulation
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.video import render_simulation
