@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from pimann.benchmark_clips import benchmark_scripts
 from pimann.command_script import scenario_steps
 from pimann.features import Normalisation, window_layout
 from pimann.generate import SECTIONS, RolloutSpec, generate_batch, generate_rollout
@@ -34,7 +35,6 @@ from pimann.mann import MANN
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
 from pimann.robot import STANDING_BASE_HEIGHT, STANDING_JOINTS, load_robot
-from pimann.rollouts import benchmark_scripts
 from pimann.trajectory import write_trajectory
 
 SECONDS = 10.0

@@ -30,6 +30,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann import command_following as cf
 from pimann.atomic import atomic_path, write_text_atomic
+from pimann.benchmark_clips import held_out_clips
 from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
 from pimann.params import Params, StandSegment
@@ -43,7 +44,6 @@ from pimann.rollout_layout import (
     read_script,
     rollout_columns,
 )
-from pimann.rollouts import held_out_clips
 from pimann.rotations import yaw_of
 
 log = logging.getLogger(__name__)

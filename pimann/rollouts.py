@@ -3,7 +3,7 @@ and without steering, generated in batches and written in the layout of pimann.r
 
 The scripts are the named scenarios of `rollout.scenario_names` and, with
 `rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
-features stage's split (`benchmark_scripts`, pimann.command_following.clip_commands).
+features stage's split (pimann.benchmark_clips).
 """
 
 from __future__ import annotations
@@ -12,55 +12,23 @@ import json
 import logging
 import shutil
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from pimann.atomic import atomic_path
+from pimann.benchmark_clips import benchmark_scripts
 from pimann.errors import PimannError
 from pimann.parallel import pool_map
 from pimann.params import Params
-from pimann.paths import REPO_ROOT
 from pimann.rollout_layout import (
     MODELS_FILE,
     RolloutKey,
     Segment,
-    clip_scenario,
     model_seeds,
     rollout_path,
     scenario_names,
 )
 
-if TYPE_CHECKING:
-    from pimann.trajectory import Trajectory
-
 log = logging.getLogger(__name__)
-
-
-def held_out_clips(collection: str | Path, params: Params) -> list[tuple[str, Trajectory]]:
-    """(name, trajectory) of the clips of a retargeted collection on the test side of the
-    features stage's split (by source clip, mirrors included), in name order."""
-    from pimann.features import split_sources
-    from pimann.trajectory import iter_collection
-
-    sources = [t.source for _, t in iter_collection(collection)]  # a pass for the names only
-    if len(set(sources)) < 2:
-        raise PimannError(collection, "needs at least 2 source clips for the test split")
-    test = split_sources(sources, params.features.test_fraction, params.features.split_seed)
-    return [(name, t) for name, t in iter_collection(collection) if t.source in test]
-
-
-def benchmark_scripts(params: Params) -> dict[str, list[Segment]]:
-    """{clip_<clip name>: script} of the command-following benchmark: each test clip of the
-    features stage's split (collection `features.input`) as the commands of its own base
-    motion (pimann.command_following.clip_commands)."""
-    from pimann.command_following import clip_commands
-
-    scripts: dict[str, list[Segment]] = {}
-    for name, trajectory in held_out_clips(REPO_ROOT / params.features.input, params):
-        scenario = clip_scenario(name)
-        if scenario in scripts:
-            raise PimannError(params.features.input, f"two test clips are named {scenario!r}")
-        scripts[scenario] = clip_commands(trajectory)
-    return scripts
 
 
 def models_record(models_dir: str | Path) -> dict[str, Any]:

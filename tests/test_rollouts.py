@@ -15,6 +15,7 @@ import pandas as pd
 import pytest
 from test_data_reference import walking_clip
 
+from pimann.benchmark_clips import benchmark_scripts
 from pimann.command_following import clip_commands
 from pimann.errors import PimannError
 from pimann.params import MotionSegment, StandSegment, load_params
@@ -33,7 +34,7 @@ from pimann.rollout_layout import (
     select_rows,
     weight_label,
 )
-from pimann.rollouts import benchmark_scripts, rollout_scripts
+from pimann.rollouts import rollout_scripts
 from pimann.trajectory import write_collection
 
 EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
