@@ -254,16 +254,17 @@ def write_results(
     tidy = frame.assign(profile=info.get("profile"), epochs=info.get("epochs"))
     with atomic_path(results_dir / "metrics.csv") as tmp:
         tidy.to_csv(tmp, index=False, float_format="%.6g")
+    claims = evaluate_claims(frame, params.figures, params.evaluate.foot_velocity_frame)
     summary = {
         "provenance": info,
         "timeseries": {name: dataclasses.asdict(key) for name, key in (timeseries or {}).items()},
         "summary": summarise(frame),
+        "claims": {claim.id: claim.status for claim in claims},  # the key metrics read these
         **({"data_reference": data_reference} if data_reference else {}),
     }
     write_text_atomic(
         results_dir / "metrics_summary.json", json.dumps(summary, indent=2, allow_nan=False) + "\n"
     )
-    claims = evaluate_claims(frame, params.figures, params.evaluate.foot_velocity_frame)
     markdown = claims_markdown(claims, info, data_reference)
     write_text_atomic(results_dir / "claims.md", markdown)
     return claims

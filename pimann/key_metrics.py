@@ -2,10 +2,10 @@
 DVC metrics, so that `dvc metrics show` and `dvc metrics diff` read a few dozen numbers.
 
 Built from results/ alone (the report stage, after evaluate and simulate): metrics.csv, the
-claims recomputed from it (pimann.claims, as claims.md), command_following.csv and
-sim_summary.json. Everything else (params, provenance, seed statistics) stays in
-metrics_summary.json and sim_summary.json, plain outputs. Keys are flat and stable from run to
-run (a value that cannot be had is null):
+claims' statuses the evaluate stage recorded in metrics_summary.json (as in claims.md),
+command_following.csv and sim_summary.json. Everything else (params, provenance, seed
+statistics) stays in metrics_summary.json and sim_summary.json, plain outputs. Keys are flat
+and stable from run to run (a value that cannot be had is null):
 
 - `claims.holding`, `claims.total`, `claim.<id>`: each claim's status as a number
   (`STATUS_CODES`: 1 holds, 0.5 within seed spread, 0.25 holds only with a model standing
@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pimann.claims import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD, Claim
+from pimann.claim_rules import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD
 from pimann.params import Params
 from pimann.rollout_layout import BASELINE, STEERING_LABEL, pi_models, select_rows, weight_label
 
@@ -65,14 +65,14 @@ def _median(rows: pd.DataFrame, column: str) -> Number:
     return _number(values.median()) if len(values) else None
 
 
-def claim_metrics(claims: list[Claim]) -> dict[str, Number]:
-    """`claims.holding`, `claims.total` and each claim's status code."""
+def claim_metrics(statuses: dict[str, str]) -> dict[str, Number]:
+    """`claims.holding`, `claims.total` and each claim's status code, from {id: status}."""
     out: dict[str, Number] = {
-        "claims.holding": sum(c.status == HOLDS for c in claims),
-        "claims.total": len(claims),
+        "claims.holding": sum(status == HOLDS for status in statuses.values()),
+        "claims.total": len(statuses),
     }
-    for claim in claims:
-        out[f"claim.{claim.id}"] = STATUS_CODES.get(claim.status)
+    for claim_id, status in statuses.items():
+        out[f"claim.{claim_id}"] = STATUS_CODES.get(status)
     return out
 
 
@@ -138,18 +138,16 @@ def sim_metrics(sim_summary: dict[str, Any] | None) -> dict[str, Number]:
 def key_metrics(results_dir: str | Path, params: Params) -> dict[str, Number]:
     """Every key number of module docstring from the files under `results_dir` (the parts
     whose file is missing are left out)."""
-    from pimann.claims import evaluate_claims
     from pimann.evaluate import read_metrics
 
     root = Path(results_dir)
     frame = read_metrics(root / "metrics.csv")
-    claims = evaluate_claims(frame, params.figures, params.evaluate.foot_velocity_frame)
     summary = _read_json(root / "metrics_summary.json") or {}
     following = root / "command_following.csv"
     rows = pd.read_csv(following) if following.is_file() else None
     return {
         "epochs": _number((summary.get("provenance") or {}).get("epochs")),
-        **claim_metrics(claims),
+        **claim_metrics(summary.get("claims") or {}),
         **rollout_metrics(frame, params),
         **data_metrics(summary),
         **following_metrics(rows),
