@@ -69,6 +69,9 @@ MODEL_FILES = {
     "retarget": "ergoCubGazeboV1_xsens/ergoCubGazeboV1_xsens.urdf",
     "simulation": "ergoCub/robots/ergoCubGazeboV1_3_minContacts/model.urdf",
 }
+# MuJoCo finds the simulation model's meshes here by file name (pimann.sim.model: strippath);
+# pinocchio builds no geometry, so it reads the URDFs alone
+MESH_DIR = "ergoCub/meshes/simmechanics"
 
 
 def mirror_joint_name(name: str) -> str:

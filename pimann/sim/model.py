@@ -17,7 +17,7 @@ import numpy as np
 from pimann.errors import PimannError
 from pimann.params import SimulateParams
 from pimann.paths import robots_dir
-from pimann.robot import JOINT_NAMES, MODEL_FILES, Robot
+from pimann.robot import JOINT_NAMES, MESH_DIR, MODEL_FILES, Robot
 
 BASE_BODY = "root_link"
 FOOT_BODIES = ("l_ankle_2", "r_ankle_2")  # the foot boxes are fused into these bodies
@@ -136,7 +136,7 @@ def _urdf_text(visual: bool = False) -> str:
     path = robots_dir() / MODEL_FILES["simulation"]
     if not path.is_file():
         raise PimannError(path, "simulation model not found (set PIMANN_SHARED?)")
-    mesh_dir = robots_dir() / "ergoCub" / "meshes" / "simmechanics"
+    mesh_dir = robots_dir() / MESH_DIR
     compiler = (
         f'<mujoco><compiler meshdir="{mesh_dir}" strippath="true" balanceinertia="true" '
         f'discardvisual="{str(not visual).lower()}"/></mujoco>'
