@@ -1,7 +1,9 @@
-"""The `pimann` command line: mocap, retargeting, rendering, generation, MuJoCo, metrics.
+"""The `pimann` command line: mocap, retargeting, rendering, generation, MuJoCo, metrics, and
+the check of the shared data.
 
 Every subcommand exits 0 on success; on bad input it prints one line naming the file and the
-problem on stderr (no traceback) and exits 2, leaving no partial output (writers are atomic).
+problem on stderr (no traceback) and exits 2, leaving no partial output (writers are atomic);
+`check-data` prints such a line for every file that is missing or differs.
 Heavy libraries are imported inside the subcommands so `pimann --help` stays instant.
 """
 
@@ -14,6 +16,7 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
+from pimann.data_check import MANIFEST
 from pimann.errors import PimannError, about
 from pimann.logs import quiet_third_party
 
@@ -124,6 +127,29 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     print(json.dumps(summary, indent=2))
 
 
+def cmd_check_data(args: argparse.Namespace) -> int:
+    """The shared folder against the data manifest: a line per problem on stderr, exit 2."""
+    from pimann.atomic import write_text_atomic
+    from pimann.data_check import build_manifest, check_groups, format_manifest, read_manifest
+
+    shared = args.shared.resolve() if args.shared else None
+    if args.write_manifest:
+        groups = build_manifest(_params(args), shared)
+        write_text_atomic(args.manifest, format_manifest(groups))
+        count = sum(len(g.files) for g in groups)
+        print(f"{args.manifest}: {count} files in {len(groups)} groups")
+        return 0
+    groups = read_manifest(args.manifest)
+    problems = check_groups(groups.values(), shared)
+    for problem in problems:
+        print(f"pimann check-data: {problem}", file=sys.stderr)
+    if problems:
+        return EXIT_BAD_INPUT
+    count = sum(len(g.files) for g in groups.values())
+    print(f"{count} files in {len(groups)} groups match {args.manifest}")
+    return 0
+
+
 def _global_options(parser: argparse.ArgumentParser, default: object) -> None:
     """--params and -v, accepted before and after the subcommand."""
     parser.add_argument(
@@ -215,6 +241,19 @@ def _parser() -> argparse.ArgumentParser:
     simulate.add_argument("--video", type=Path, help=".mp4, .gif or .png strip of the walk")
     simulate.add_argument("--duration", type=float, help="simulate at most this many seconds")
 
+    check = add("check-data", cmd_check_data, "the shared data against the data manifest")
+    check.add_argument(
+        "--shared", type=Path, metavar="DIR", help="data folder (default: $PIMANN_SHARED, else "
+        "../shared)"
+    )  # fmt: skip
+    check.add_argument(
+        "--manifest", type=Path, default=MANIFEST, help="default: the package's data_manifest.txt"
+    )
+    check.add_argument(
+        "--write-manifest", action="store_true", help="record the folder as it is now (the "
+        "robot models and every file of data.sources) instead of checking it"
+    )  # fmt: skip
+
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")
     metrics.add_argument("--group", help="clip group inside a collection file")
@@ -233,14 +272,14 @@ def main(argv: list[str] | None = None) -> int:
     )
     quiet_third_party()
     try:
-        args.handler(args)
+        status = args.handler(args)
     except PimannError as error:
         print(f"pimann {args.command}: {error}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except OSError as error:  # unreadable or unwritable path: still one line, no traceback
         print(f"pimann {args.command}: {error.filename}: {error.strerror}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    return 0
+    return status or 0
 
 
 if __name__ == "__main__":

@@ -6,6 +6,7 @@ place from the folder this variable names, `../shared` beside the repository by 
 
 from __future__ import annotations
 
+import glob
 import os
 from pathlib import Path
 
@@ -46,7 +47,23 @@ def mocap_dir() -> Path:
     return shared_dir() / "data" / "mocap"
 
 
-def resolve_shared(relative: str | Path) -> Path:
-    """A path from params.yaml: relative ones are taken inside the shared folder."""
+def resolve_shared(relative: str | Path, shared: Path | None = None) -> Path:
+    """A path from params.yaml: relative ones are taken inside the shared folder (`shared`,
+    default `shared_dir()`)."""
     path = Path(relative)
-    return path if path.is_absolute() else shared_dir() / path
+    return path if path.is_absolute() else (shared or shared_dir()) / path
+
+
+def shared_glob(pattern: str | Path, shared: Path | None = None) -> list[Path]:
+    """The files a glob of params.yaml (data.sources paths) matches, sorted."""
+    return sorted(
+        Path(p) for p in glob.glob(str(resolve_shared(pattern, shared))) if Path(p).is_file()
+    )
+
+
+def bandai_label_files(bvh: Path) -> tuple[Path, Path, Path]:
+    """The files `bandai_labels` reads for one BVH: its JSON, the dataset's content and style
+    lists (<dataset>/data/<file>.bvh, labels in <dataset>/cfg)."""
+    dataset_dir = bvh.parent.parent
+    cfg = dataset_dir / "cfg"
+    return bvh.with_suffix(".json"), cfg / "content_label.txt", cfg / "style_label.txt"

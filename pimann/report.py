@@ -11,6 +11,8 @@ runs after evaluate, figures, simulate and data_report):
 - command following (results/command_following.md and .png);
 - the MuJoCo runs (sim_summary.json) and their videos (results/sim/*.mp4, .gif);
 - the data the models learn from (results/data_report.md and .png);
+- the time budget: every stage's wall time (results/stage_times/, pimann.stage_times), also
+  gathered into results/stage_times.json;
 - the profile and every parameter, collapsed.
 
 Markdown is rendered by markdown-it-py (tables on, raw HTML off: the files are ours, but a
@@ -162,6 +164,25 @@ def _simulation(results: Path) -> str:
     return table + _figures(videos)
 
 
+def _stage_times(summary: dict[str, Any]) -> str:
+    if not summary["stages"]:
+        return (
+            '<p class="missing">No stage times in results/stage_times/: <code>dvc repro</code> '
+            "records every stage it runs.</p>"
+        )
+    rows = [
+        [r["stage"], r["wall_s"] / 60.0, r.get("started"), r.get("profile"), r.get("cpus"),
+         r.get("torch_device")]
+        for r in summary["stages"]
+    ]  # fmt: skip
+    rows.append(["total", summary["total_wall_s"] / 60.0, None, None, None, None])
+    return (
+        "<p>Wall time of each stage in the run that made its outputs (a stage DVC skipped "
+        "keeps its earlier record); the report stage itself is not counted.</p>"
+        + _table(["stage", "wall (min)", "started (UTC)", "profile", "cores", "torch"], rows)
+    )
+
+
 def _params(params: Any, profile: str) -> str:
     from pimann.params import as_dict
 
@@ -190,15 +211,24 @@ def _header(summary: dict[str, Any], metrics: dict[str, Any]) -> str:
 SECTIONS = (
     ("numbers", "Key numbers"), ("claims", "The paper's claims"), ("figures", "Figures"),
     ("following", "Command following"), ("simulation", "MuJoCo"), ("data", "The data"),
-    ("params", "Parameters"),
+    ("time", "Time budget"), ("params", "Parameters"),
 )  # fmt: skip
 
 
 def build_report(
-    results_dir: str | Path, figures_dir: str | Path, params: Any, metrics: dict[str, Any]
+    results_dir: str | Path,
+    figures_dir: str | Path,
+    params: Any,
+    metrics: dict[str, Any],
+    stage_times: dict[str, Any] | None = None,
 ) -> str:
-    """The whole page as one HTML string (module docstring); `metrics`: pimann.key_metrics."""
+    """The whole page as one HTML string (module docstring); `metrics`: pimann.key_metrics,
+    `stage_times`: pimann.stage_times.gather (default: gathered from results/stage_times/)."""
+    from pimann.stage_times import TIMES_FOLDER, gather
+
     results, figures = Path(results_dir), Path(figures_dir)
+    if stage_times is None:
+        stage_times = gather(results / TIMES_FOLDER)
     summary_path = results / "metrics_summary.json"
     summary = json.loads(summary_path.read_text()) if summary_path.is_file() else {}
     following_png = results / "command_following.png"
@@ -213,6 +243,7 @@ def build_report(
         "simulation": _simulation(results),
         "data": _markdown_file(results / "data_report.md", "data_report")
         + (_figures([data_png]) if data_png.is_file() else ""),
+        "time": _stage_times(stage_times),
         "params": _params(params, str(getattr(params, "profile", "?"))),
     }
     nav = "".join(f'<a href="#{key}">{html.escape(title)}</a>' for key, title in SECTIONS)
@@ -236,13 +267,17 @@ def build_report(
 def write_report(
     results_dir: str | Path, figures_dir: str | Path, params: Any, out: str | Path | None = None
 ) -> tuple[Path, Path]:
-    """results/metrics.json and results/report.html (atomic each); their paths."""
+    """results/metrics.json, results/stage_times.json and results/report.html (atomic each);
+    the paths of the first and the last."""
     from pimann.atomic import write_text_atomic
     from pimann.key_metrics import METRICS_FILE, key_metrics, write_key_metrics
+    from pimann.stage_times import SUMMARY_FILE, TIMES_FOLDER, write_summary
 
     results = Path(results_dir)
     metrics = key_metrics(results, params)
     metrics_path = write_key_metrics(metrics, results / METRICS_FILE)
+    stage_times = write_summary(results / TIMES_FOLDER, results / SUMMARY_FILE)
     report_path = Path(out) if out is not None else results / REPORT_FILE
-    write_text_atomic(report_path, build_report(results, figures_dir, params, metrics))
+    page = build_report(results, figures_dir, params, metrics, stage_times)
+    write_text_atomic(report_path, page)
     return metrics_path, report_path

@@ -72,6 +72,8 @@ MODEL_FILES = {
     "retarget": "ergoCubGazeboV1_xsens/ergoCubGazeboV1_xsens.urdf",
     "simulation": "ergoCub/robots/ergoCubGazeboV1_3_minContacts/model.urdf",
 }
+# MuJoCo finds the simulation model's meshes here by file name (pimann.sim.model: strippath);
+# pinocchio builds no geometry, so it reads the URDFs alone
 MESH_DIRS = {"simulation": "ergoCub/meshes/simmechanics"}
 
 

@@ -20,7 +20,7 @@ from pimann.stage import stage_entry
 log = logging.getLogger("data_report")
 
 
-@stage_entry
+@stage_entry(reads=("robot",))
 def main(argv: list[str] | None = None) -> None:
     quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

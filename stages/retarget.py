@@ -37,7 +37,7 @@ def _indexed(item, work):
     return index, work(take)
 
 
-@stage_entry
+@stage_entry(reads=("mocap", "robot"))
 def main(argv: list[str] | None = None) -> None:
     params = load_params()
     takes = select_takes(params.data)

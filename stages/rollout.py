@@ -25,7 +25,7 @@ from pimann.stage import stage_entry
 log = logging.getLogger("rollout")
 
 
-@stage_entry
+@stage_entry(reads=("robot",))
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--models", type=Path, required=True, help="a training output folder")

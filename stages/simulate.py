@@ -26,7 +26,7 @@ from pimann.stage import stage_entry
 log = logging.getLogger("simulate")
 
 
-@stage_entry
+@stage_entry(reads=("robot", "simulation"))
 def main(argv: list[str] | None = None) -> None:
     quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])

@@ -25,7 +25,7 @@ from pimann.train import pick_device, train_models
 log = logging.getLogger("train")
 
 
-@stage_entry
+@stage_entry(reads=("robot",))
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--pi-weight", type=float, required=True)

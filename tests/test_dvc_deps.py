@@ -28,6 +28,8 @@ PACKAGE = "pimann"
 SHARED_DEP = "../shared"  # the default shared folder beside the checkout, as dvc.yaml names it
 CODE_PREFIXES = (f"{PACKAGE}/", "stages/")
 # Reading a rollout must not rerun when the claims or their evaluation are reworded.
+DATA_CHECK = f"{PACKAGE}/data_check.py"
+PATHS = f"{PACKAGE}/paths.py"
 EVALUATION_MODULES = ("pimann/evaluate.py", "pimann/claims.py", "pimann/claim_rules.py")
 GENERATION_STAGES = ("rollout", "rollout_baseline", "simulate")
 
@@ -174,6 +176,8 @@ def shared_reads(files: set[Path], params: dict) -> dict[str, str]:
     reads: dict[str, str] = {}
     for path in sorted(files):
         module = path.relative_to(ROOT).as_posix()
+        if module in (DATA_CHECK, PATHS):  # the check reads what stage_entry(reads=...)
+            continue  # names; paths.py defines resolve_shared, its callers read
         for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
             found: list[str] = []
             if isinstance(node, ast.Call) and _called_name(node) == "load_robot":
@@ -190,10 +194,37 @@ def shared_reads(files: set[Path], params: dict) -> dict[str, str]:
                 )
                 if table is not None:
                     found = [(robots / table[_constant(node.slice)]).as_posix()]
-            elif isinstance(node, ast.Call) and _called_name(node) == "resolve_shared":
+            elif isinstance(node, ast.Call) and _called_name(node) in (
+                "resolve_shared",
+                "shared_glob",
+            ):
                 found = sorted(_source_paths(params))
             for shared in found:
                 reads.setdefault(shared, module)
+    return reads
+
+
+def checked_reads(script: Path, params: dict) -> dict[str, str]:
+    """Shared files the data check of `stage_entry(reads=groups)` hashes before the stage
+    runs -> the script: `robot` the retargeting URDF, `simulation` the MuJoCo model's URDF
+    and meshes, `mocap` the data.sources."""
+    robots = PurePosixPath("robots")
+    by_group = {
+        "robot": [(robots / MODEL_FILES["retarget"]).as_posix()],
+        "simulation": [
+            (robots / MODEL_FILES["simulation"]).as_posix(),
+            (robots / MESH_DIRS["simulation"]).as_posix(),
+        ],
+        "mocap": sorted(_source_paths(params)),
+    }
+    reads: dict[str, str] = {}
+    for node in ast.walk(ast.parse(script.read_text(), filename=str(script))):
+        if isinstance(node, ast.Call) and _called_name(node) == "stage_entry":
+            for keyword in node.keywords:
+                if keyword.arg == "reads":
+                    for group in ast.literal_eval(keyword.value):
+                        for shared in by_group[group]:
+                            reads.setdefault(shared, script.relative_to(ROOT).as_posix())
     return reads
 
 
@@ -217,9 +248,9 @@ def _check_stage(name: str, stage: dict, params: dict) -> list[str]:
     modules = _relative(closure)
     code_deps = {dep for dep in deps if dep.startswith(CODE_PREFIXES)}
     shared_deps = {dep for dep in deps if dep.startswith(SHARED_DEP + "/")}
-    reads = {
-        f"{SHARED_DEP}/{path}": module for path, module in shared_reads(closure, params).items()
-    }
+    script = _stage_script(name, stage)
+    read = {**checked_reads(script, params), **shared_reads(closure, params)}
+    reads = {f"{SHARED_DEP}/{path}": module for path, module in read.items()}
     problems = []
     for module in sorted(modules):
         if not any(_covers(dep, module) for dep in code_deps):

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import glob
 import json
 import re
 from pathlib import Path
@@ -24,7 +23,7 @@ from pimann.intervals import true_runs
 from pimann.mocap.bvh import read_bvh
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import DataParams, SkeletonParams, SourceParams
-from pimann.paths import resolve_shared
+from pimann.paths import bandai_label_files, resolve_shared, shared_glob
 
 _NAME = re.compile(r"^dataset-(\d+)_(.+)_([^_]+)_(\d+)$")
 PAUSE_SPEED = 0.1  # m/s: the pelvis moves horizontally slower than this while standing ...
@@ -76,10 +75,9 @@ def bandai_labels(bvh: Path) -> tuple[str, str]:
     if not match:
         raise PimannError(bvh, "name is not dataset-N_<content>_<style>_NNN")
     prefix = f"dataset-{int(match.group(1))}_"
-    dataset_dir = bvh.parent.parent  # <dataset>/data/<file>.bvh, labels in <dataset>/cfg
-    contents = _labels(dataset_dir / "cfg/content_label.txt", prefix)
-    styles = _labels(dataset_dir / "cfg/style_label.txt", prefix)
-    label_path = bvh.with_suffix(".json")
+    label_path, content_path, style_path = bandai_label_files(bvh)
+    contents = _labels(content_path, prefix)
+    styles = _labels(style_path, prefix)
     try:
         label = json.loads(label_path.read_text())
         content, style = contents[label["content"]], styles[label["style"]]
@@ -112,7 +110,7 @@ def _take(path: Path, key: str, source: SourceParams, data: DataParams) -> Take:
 def source_takes(key: str, source: SourceParams, data: DataParams) -> list[Take]:
     """The takes of one source: its files, labelled and filtered, at most `max_takes`."""
     pattern = str(resolve_shared(source.path))
-    paths = sorted(Path(p) for p in glob.glob(pattern) if Path(p).is_file())
+    paths = shared_glob(source.path)
     if not paths:
         raise PimannError(pattern, f"data.sources.{key}: the glob matches no file")
     if source.labels == "motion" and (source.contents is not None or source.styles is not None):
