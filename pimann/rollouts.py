@@ -181,7 +181,12 @@ def benchmark_scripts(params: Params) -> dict[str, list[Segment]]:
 def model_seeds(models_dir: str | Path) -> dict[int, Path]:
     """{seed: folder} of the trained models in a training output (`<seed>/meta.json`)."""
     models_dir = Path(models_dir)
-    seeds = {int(p.parent.name): p.parent for p in models_dir.glob("*/meta.json")}
+    seeds: dict[int, Path] = {}
+    for folder in (p.parent for p in models_dir.glob("*/meta.json")):
+        try:
+            seeds[int(folder.name)] = folder
+        except ValueError:
+            raise PimannError(folder, "not a seed: a model folder is named by its seed") from None
     if not seeds:
         raise PimannError(models_dir, "holds no trained model (<seed>/meta.json)")
     return dict(sorted(seeds.items()))
@@ -204,6 +209,8 @@ def rollout_columns(
                 raise PimannError(
                     record_path, "missing: the rollout stage records the models here"
                 ) from None
+            except (KeyError, TypeError, ValueError) as error:
+                raise PimannError(record_path, f"not a rollout record ({error!r})") from None
         seed = seeds[key.model].get(str(key.seed))
         if seed is None:
             raise PimannError(record_path, f"no record of seed {key.seed}")
@@ -219,16 +226,22 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
     """What the rollouts' provenance keeps of each seed's meta.json."""
     record: dict[str, Any] = {}
     for seed, folder in model_seeds(models_dir).items():
-        meta = json.loads((folder / "meta.json").read_text())
-        record[str(seed)] = {
-            "pi_weight": float(meta["pi_weight"]),
-            "variant": meta["variant"],
-            "best_epoch": meta.get("best_epoch"),
-            "best_test_loss": meta.get("best_test_loss"),
-            "epochs": meta.get("epochs"),
-            "train_samples": meta.get("train_samples"),
-            "clips": len(meta.get("train_clips", [])) + len(meta.get("test_clips", [])),
-        }
+        meta_path = folder / "meta.json"
+        try:
+            meta = json.loads(meta_path.read_text())
+            record[str(seed)] = {
+                "pi_weight": float(meta["pi_weight"]),
+                "variant": meta["variant"],
+                "best_epoch": meta.get("best_epoch"),
+                "best_test_loss": meta.get("best_test_loss"),
+                "epochs": meta.get("epochs"),
+                "train_samples": meta.get("train_samples"),
+                "clips": len(meta.get("train_clips", [])) + len(meta.get("test_clips", [])),
+            }
+        except KeyError as error:
+            raise PimannError(meta_path, f"a model's metadata lacks {error}") from None
+        except (AttributeError, TypeError, ValueError) as error:  # not JSON, not an object
+            raise PimannError(meta_path, f"not a model's metadata ({error})") from None
     return record
 
 
