@@ -12,7 +12,7 @@ class PimannError(Exception):
 
     def __init__(self, path: str | Path | None, problem: str, *, frame: int | None = None):
         self.path = None if path is None else str(path)
-        self.problem = problem
+        self.problem = " ".join(str(problem).split())  # one line, whatever a library said
         self.frame = frame
         where = self.path or "<input>"
         if frame is not None:

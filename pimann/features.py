@@ -33,7 +33,7 @@ from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from pimann.atomic import atomic_path
-from pimann.errors import PimannError
+from pimann.errors import PimannError, about, require_finite
 from pimann.params import FeaturesParams
 from pimann.robot import N_JOINTS
 from pimann.rotations import yaw_only
@@ -131,10 +131,32 @@ class FeatureLayout:
 
     @classmethod
     def from_json(cls, text: str) -> FeatureLayout:
-        raw = json.loads(text)
-        raw["input_offsets"] = tuple(raw["input_offsets"])
-        raw["output_offsets"] = tuple(raw["output_offsets"])
-        return cls(**raw)
+        """The layout `to_json` wrote; anything else raises PimannError (the caller names
+        the file)."""
+        try:
+            raw = json.loads(text)
+            if not isinstance(raw, dict):
+                raise TypeError(f"a JSON {type(raw).__name__}, not an object")
+            raw["input_offsets"] = tuple(raw["input_offsets"])
+            raw["output_offsets"] = tuple(raw["output_offsets"])
+            layout = cls(**raw)
+        except KeyError as error:
+            raise PimannError(None, f"the feature layout lacks {error}") from None
+        except (TypeError, ValueError) as error:
+            raise PimannError(None, f"not a feature layout ({error})") from None
+        offsets = layout.input_offsets + layout.output_offsets
+        rate = layout.rate_hz
+        checks = {
+            "offsets that are not integers": all(type(o) is int for o in offsets),
+            f"rate_hz {rate!r}": type(rate) in (int, float) and rate > 0,
+            f"variant {layout.variant!r}": layout.variant in VARIANTS,
+            f"pose_input {layout.pose_input!r}": layout.pose_input in POSE_INPUTS,
+            f"n_joints {layout.n_joints!r}": type(layout.n_joints) is int and layout.n_joints > 0,
+        }
+        bad = [what for what, fine in checks.items() if not fine]
+        if bad:
+            raise PimannError(None, f"the feature layout has {', '.join(bad)}")
+        return layout
 
 
 @dataclasses.dataclass(frozen=True)
@@ -417,30 +439,84 @@ def write_dataset(path: str | Path, dataset: FeatureDataset) -> None:
             file.attrs["standing"] = json.dumps(dataset.standing)
 
 
+def _array(file: h5py.File, path: Path, name: str, shape: tuple[int | None, ...]) -> np.ndarray:
+    """Dataset `name`: numbers of `shape` (None: any length), all finite; else named."""
+    if not isinstance(file.get(name), h5py.Dataset):
+        raise PimannError(path, f"not a feature dataset (lacks the dataset {name!r})")
+    values = np.asarray(file[name][()])
+    fits = values.ndim == len(shape) and all(
+        want in (None, got) for want, got in zip(shape, values.shape, strict=True)
+    )
+    if values.dtype.kind not in "biuf" or not fits:
+        wanted = str(tuple("N" if w is None else w for w in shape)).replace("'", "")
+        raise PimannError(
+            path, f"{name} is {values.shape} {values.dtype}; the layout needs {wanted} numbers"
+        )
+    require_finite(path, name, values)
+    return values
+
+
+def _names(file: h5py.File, path: Path, key: str) -> list[str]:
+    """The string-list attribute `key`."""
+    values = np.asarray(file.attrs[key])
+    if values.ndim != 1:
+        raise PimannError(path, f"attribute {key!r} is not a list of names")
+    return [v.decode() if isinstance(v, bytes) else str(v) for v in values]
+
+
 def read_dataset(path: str | Path) -> FeatureDataset:
+    """The file `write_dataset` wrote; any other (another layout, cut short, NaN) named."""
     path = Path(path)
     try:
         file = h5py.File(path, "r")
-    except (FileNotFoundError, OSError) as error:
+    except OSError as error:
         raise PimannError(path, f"cannot open the feature dataset ({error})") from None
-    with file:
-        needed = ("X_train", "Y_train", "X_test", "Y_test", "X_mean", "X_std", "Y_mean", "Y_std")
-        missing = [n for n in needed if n not in file]
-        if missing or "layout" not in file.attrs:
-            raise PimannError(path, f"not a feature dataset (lacks {missing or ['layout']})")
-        stats = Normalisation(*(file[n][()] for n in ("X_mean", "X_std", "Y_mean", "Y_std")))
-        return FeatureDataset(
-            x_train=file["X_train"][()],
-            y_train=file["Y_train"][()],
-            x_test=file["X_test"][()],
-            y_test=file["Y_test"][()],
-            stats=stats,
-            layout=FeatureLayout.from_json(file.attrs["layout"]),
-            clips=[str(c) for c in file.attrs["clips"]],
-            sources=[str(s) for s in file.attrs["sources"]],
-            train_origin=file["train_origin"][()],
-            test_origin=file["test_origin"][()],
-            train_contacts=file["train_contacts"][()] if "train_contacts" in file else None,
-            test_contacts=file["test_contacts"][()] if "test_contacts" in file else None,
-            standing=json.loads(file.attrs["standing"]) if "standing" in file.attrs else None,
-        )
+    try:
+        with file:
+            return _read_open_dataset(file, path)
+    except (OSError, KeyError) as error:  # an HDF5 file damaged inside
+        raise PimannError(path, f"unreadable feature dataset ({error})") from None
+
+
+def _read_open_dataset(file: h5py.File, path: Path) -> FeatureDataset:
+    needed = ("X_train", "Y_train", "X_test", "Y_test", "X_mean", "X_std", "Y_mean", "Y_std",
+              "train_origin", "test_origin")  # fmt: skip
+    missing = [n for n in needed if n not in file]
+    missing += [f"attribute {n}" for n in ("layout", "clips", "sources") if n not in file.attrs]
+    if missing:
+        raise PimannError(path, f"not a feature dataset (lacks {missing})")
+    with about(path, "attribute layout"):
+        layout = FeatureLayout.from_json(file.attrs["layout"])
+    clips, sources = _names(file, path, "clips"), _names(file, path, "sources")
+    if len(sources) != len(clips):
+        raise PimannError(path, f"{len(clips)} clips but {len(sources)} sources")
+    n_in, n_out = layout.input_dim, layout.output_dim
+    stats = Normalisation(
+        _array(file, path, "X_mean", (n_in,)), _array(file, path, "X_std", (n_in,)),
+        _array(file, path, "Y_mean", (n_out,)), _array(file, path, "Y_std", (n_out,)),
+    )  # fmt: skip
+    if (stats.x_std <= 0).any() or (stats.y_std <= 0).any():
+        raise PimannError(path, "X_std or Y_std holds values <= 0")
+    split = {}
+    for side in ("train", "test"):
+        x = _array(file, path, f"X_{side}", (None, n_in))
+        y = _array(file, path, f"Y_{side}", (len(x), n_out))
+        origin = _array(file, path, f"{side}_origin", (len(x), 2)).astype(np.int64)
+        if len(origin) and not (0 <= origin[:, 0].min() and origin[:, 0].max() < len(clips)):
+            raise PimannError(path, f"{side}_origin names clips beyond the {len(clips)} listed")
+        contacts = None
+        if f"{side}_contacts" in file:
+            contacts = _array(file, path, f"{side}_contacts", (len(x), 2)).astype(bool)
+        split[side] = x, y, origin, contacts
+    try:
+        standing = json.loads(file.attrs["standing"]) if "standing" in file.attrs else None
+    except (TypeError, ValueError) as error:
+        raise PimannError(path, f"attribute standing is not JSON ({error})") from None
+    (x_train, y_train, train_origin, train_contacts) = split["train"]
+    (x_test, y_test, test_origin, test_contacts) = split["test"]
+    return FeatureDataset(
+        x_train=x_train, y_train=y_train, x_test=x_test, y_test=y_test, stats=stats,
+        layout=layout, clips=clips, sources=sources, train_origin=train_origin,
+        test_origin=test_origin, train_contacts=train_contacts, test_contacts=test_contacts,
+        standing=standing,
+    )  # fmt: skip

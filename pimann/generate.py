@@ -257,12 +257,17 @@ def _model_rollouts(
     seed, variant, start_pose, steering.
     """
     from pimann.rollout_layout import SCRIPT_ATTR, script_json
-    from pimann.train import load_model
+    from pimann.train import META_FILE, load_model
 
     model, layout, stats, meta = load_model(model_dir)
     standing = StandingPose.nominal()
     if params.rollout.start_pose == "data":
-        standing = StandingPose.from_json(meta.get("standing"))
+        try:
+            standing = StandingPose.from_json(meta.get("standing"))
+        except (KeyError, TypeError, ValueError) as error:
+            raise PimannError(
+                Path(model_dir) / META_FILE, f"standing: not a standing pose ({error!r})"
+            ) from None
     model_attrs = {
         key: meta[key] for key in ("pi_weight", "seed", "variant") if meta.get(key) is not None
     }

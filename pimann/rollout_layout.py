@@ -138,7 +138,12 @@ def clip_scenario(clip: str) -> str:
 def model_seeds(models_dir: str | Path) -> dict[int, Path]:
     """{seed: folder} of the trained models in a training output (`<seed>/meta.json`)."""
     models_dir = Path(models_dir)
-    seeds = {int(p.parent.name): p.parent for p in models_dir.glob("*/meta.json")}
+    seeds: dict[int, Path] = {}
+    for folder in (p.parent for p in models_dir.glob("*/meta.json")):
+        try:
+            seeds[int(folder.name)] = folder
+        except ValueError:
+            raise PimannError(folder, "not a seed: a model folder is named by its seed") from None
     if not seeds:
         raise PimannError(models_dir, "holds no trained model (<seed>/meta.json)")
     return dict(sorted(seeds.items()))
@@ -161,6 +166,8 @@ def rollout_columns(
                 raise PimannError(
                     record_path, "missing: the rollout stage records the models here"
                 ) from None
+            except (KeyError, TypeError, ValueError) as error:
+                raise PimannError(record_path, f"not a rollout record ({error!r})") from None
         seed = seeds[key.model].get(str(key.seed))
         if seed is None:
             raise PimannError(record_path, f"no record of seed {key.seed}")

@@ -35,16 +35,22 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
     """What the rollouts' provenance keeps of each seed's meta.json."""
     record: dict[str, Any] = {}
     for seed, folder in model_seeds(models_dir).items():
-        meta = json.loads((folder / "meta.json").read_text())
-        record[str(seed)] = {
-            "pi_weight": float(meta["pi_weight"]),
-            "variant": meta["variant"],
-            "best_epoch": meta.get("best_epoch"),
-            "best_test_loss": meta.get("best_test_loss"),
-            "epochs": meta.get("epochs"),
-            "train_samples": meta.get("train_samples"),
-            "clips": len(meta.get("train_clips", [])) + len(meta.get("test_clips", [])),
-        }
+        meta_path = folder / "meta.json"
+        try:
+            meta = json.loads(meta_path.read_text())
+            record[str(seed)] = {
+                "pi_weight": float(meta["pi_weight"]),
+                "variant": meta["variant"],
+                "best_epoch": meta.get("best_epoch"),
+                "best_test_loss": meta.get("best_test_loss"),
+                "epochs": meta.get("epochs"),
+                "train_samples": meta.get("train_samples"),
+                "clips": len(meta.get("train_clips", [])) + len(meta.get("test_clips", [])),
+            }
+        except KeyError as error:
+            raise PimannError(meta_path, f"a model's metadata lacks {error}") from None
+        except (AttributeError, TypeError, ValueError) as error:  # not JSON, not an object
+            raise PimannError(meta_path, f"not a model's metadata ({error})") from None
     return record
 
 

@@ -64,7 +64,11 @@ class StandingPose:
         joints = np.asarray(raw["joints"], dtype=float)
         if joints.shape != STANDING_JOINTS.shape:
             raise ValueError(f"standing pose has {joints.size} joints, not {STANDING_JOINTS.size}")
-        return cls(joints, np.asarray(raw["roll_pitch"], dtype=float), str(raw["origin"]))
+        roll_pitch = np.asarray(raw["roll_pitch"], dtype=float)
+        finite = np.isfinite(joints).all() and np.isfinite(roll_pitch).all()
+        if roll_pitch.shape != (2,) or not finite:
+            raise ValueError("standing pose needs finite joints and 2 finite roll, pitch angles")
+        return cls(joints, roll_pitch, str(raw["origin"]))
 
 
 def data_standing(clips: Iterable[Trajectory]) -> StandingPose:

@@ -3,7 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+from pathlib import Path
 
+import h5py
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -17,10 +20,11 @@ from pimann.features import (
     read_dataset,
     split_sources,
     window_layout,
+    write_dataset,
 )
 from pimann.params import load_params
 from pimann.robot import N_JOINTS, STANDING_JOINTS
-from pimann.trajectory import Trajectory
+from pimann.trajectory import Trajectory, write_trajectory
 
 RATE = 50.0
 PITCH = 0.3  # a fixed base tilt, so that base and world frames differ in every axis
@@ -241,3 +245,131 @@ def test_normalisation_uses_training_statistics_only(params, tmp_path):
             expected.append(around.all(axis=0))  # down on every frame within the margin
         np.testing.assert_array_equal(contacts, np.array(expected))
     assert back.train_contacts.all(-1).any() and not back.train_contacts.all()
+
+
+def write_small_dataset(path: Path) -> Path:
+    """A valid feature file: 3 synthetic sources and their 'mirrors'."""
+    params = load_params()
+    write_dataset(path, build_dataset(synthetic_collection(n_sources=3), params.features, "full"))
+    return path
+
+
+def _h5(edit):
+    """A breaker that edits the HDF5 file in place."""
+
+    def apply(path: Path) -> None:
+        with h5py.File(path, "r+") as file:
+            edit(file)
+
+    return apply
+
+
+def _replace(name: str, change):
+    """Dataset `name` rewritten as change(its values)."""
+
+    def edit(file: h5py.File) -> None:
+        values = change(file[name][()])
+        del file[name]
+        file.create_dataset(name, data=values)
+
+    return _h5(edit)
+
+
+def _set(name: str, index: tuple, value: float):
+    def change(values: np.ndarray) -> np.ndarray:
+        values[index] = value
+        return values
+
+    return _replace(name, change)
+
+
+def _delete(name: str):
+    return _h5(lambda file: file.__delitem__(name))
+
+
+def _attr(name: str, value=None):
+    """Attribute `name` set to `value`, or deleted (None)."""
+
+    def edit(file: h5py.File) -> None:
+        if value is None:
+            del file.attrs[name]
+        else:
+            file.attrs[name] = value
+
+    return _h5(edit)
+
+
+def _layout(**changes):
+    """The layout attribute with `changes` (None: the key removed)."""
+
+    def edit(file: h5py.File) -> None:
+        raw = {**json.loads(file.attrs["layout"]), **changes}
+        file.attrs["layout"] = json.dumps({k: v for k, v in raw.items() if v is not None})
+
+    return _h5(edit)
+
+
+def _bytes(change):
+    return lambda path: path.write_bytes(change(path.read_bytes()))
+
+
+# kind: (how a good feature file is broken, what the error says)
+BROKEN_FEATURES = {
+    "empty": (_bytes(lambda data: b""), "cannot open"),
+    "truncated": (_bytes(lambda data: data[: len(data) // 2]), "cannot open"),
+    "text": (_bytes(lambda data: b"X_train,Y_train\n1,2\n"), "cannot open"),
+    "trajectory": (
+        lambda path: write_trajectory(path, synthetic_clip()),
+        r"not a feature dataset \(lacks \['X_train'",
+    ),
+    "no_origin": (_delete("test_origin"), "lacks.*test_origin"),
+    "no_clips": (_attr("clips"), "lacks.*attribute clips"),
+    "layout_not_json": (_attr("layout", "{input_offsets"), "attribute layout: not a feature"),
+    "layout_lacks_variant": (_layout(variant=None), "layout.*missing.*'variant'"),
+    "layout_lacks_offsets": (_layout(output_offsets=None), "layout lacks 'output_offsets'"),
+    "layout_unknown_key": (_layout(depth=3), "layout.*depth"),
+    "layout_bad_variant": (_layout(variant="sideways"), "variant 'sideways'"),
+    "layout_other_window": (
+        _layout(input_offsets=[-10, 0, 10]),
+        r"X_mean is \(130,\) float64; the layout needs \(76,\)",
+    ),
+    "wrong_shape": (
+        _replace("X_train", lambda x: x[:, :-1]),
+        r"X_train is \(\d+, 129\) float32; the layout needs \(N, 130\)",
+    ),
+    "other_count": (_replace("Y_test", lambda y: y[:-1]), r"Y_test is \(\d+, 100\) float32"),
+    "strings": (_replace("X_test", lambda x: np.array([b"a", b"b"])), "X_test.*numbers"),
+    "nan": (_set("X_train", (3, 5), np.nan), r"\(frame 3\): X_train holds NaN"),
+    "nan_stats": (_set("Y_std", (4,), np.inf), "Y_std holds NaN"),
+    "zero_std": (_set("X_std", (0,), 0.0), "X_std or Y_std holds values <= 0"),
+    "origin_range": (_set("train_origin", (0, 0), 99), "train_origin names clips beyond"),
+    "contacts_shape": (
+        _replace("train_contacts", lambda c: np.concatenate([c, c[:, :1]], axis=1)),
+        r"train_contacts is \(\d+, 3\) bool",
+    ),
+    "standing_not_json": (_attr("standing", "{joints"), "standing is not JSON"),
+    "sources_count": (_attr("sources", ["a"]), "clips but 1 sources"),
+}
+
+
+def break_features(path: Path, kind: str) -> str:
+    """Break the good feature file at `path` as `kind`; what the error must say."""
+    breaker, message = BROKEN_FEATURES[kind]
+    breaker(path)
+    return message
+
+
+@pytest.fixture(scope="module")
+def small_dataset(tmp_path_factory) -> bytes:
+    return write_small_dataset(tmp_path_factory.mktemp("features") / "full.h5").read_bytes()
+
+
+@pytest.mark.parametrize("kind", BROKEN_FEATURES)
+def test_read_dataset_names_the_file_and_what_is_wrong(tmp_path, small_dataset, kind):
+    path = tmp_path / "full.h5"
+    path.write_bytes(small_dataset)
+    assert len(read_dataset(path).x_train) > 0  # the file reads before it is broken
+    message = break_features(path, kind)
+    with pytest.raises(PimannError, match=message) as raised:
+        read_dataset(path)
+    assert raised.value.path == str(path) and "\n" not in str(raised.value)

@@ -1,14 +1,21 @@
-"""Fuzz the command line with broken inputs: every subcommand that reads a mocap or a
-trajectory file, fed an empty, truncated, NaN-laden, wrong-layout or wrong-type file, exits 2
-with one line naming the file, no traceback, and leaves no output behind."""
+"""Fuzz the command line with broken inputs: every subcommand, fed for each input it reads (a
+mocap file, a trajectory file, a trained model's folder) an empty, truncated, NaN-laden,
+wrong-layout or wrong-type file, exits 2 with one line naming the file, no traceback, and
+leaves no output behind. No subcommand reads a feature file: the train stage does, and
+tests/test_train.py feeds it broken ones (tests/test_features.py: read_dataset itself)."""
 
 from __future__ import annotations
+
+import json
+import shutil
 
 import h5py
 import numpy as np
 import pytest
+from test_train import BROKEN_MODELS, break_model, save_small_model
 
 from pimann.cli import main
+from pimann.params import load_params
 from pimann.paths import shared_dir
 from pimann.robot import STANDING_JOINTS
 from pimann.trajectory import Trajectory, write_trajectory
@@ -111,4 +118,32 @@ def test_broken_trajectory(tmp_path, capsys, command, kind):
     }[command]
     assert main(argv) == 2
     _one_line_naming(capsys, path)
+    assert not out.exists()
+
+
+@pytest.fixture(scope="module")
+def small_model(tmp_path_factory):
+    return save_small_model(tmp_path_factory.mktemp("models") / "3")
+
+
+def _bad_standing(folder) -> None:
+    """meta.json's standing pose (generate starts from it with rollout.start_pose data)."""
+    meta = json.loads((folder / "meta.json").read_text())
+    meta["standing"] = {"joints": [0.1, 0.2], "roll_pitch": [0.0, 0.0], "origin": "data"}
+    (folder / "meta.json").write_text(json.dumps(meta))
+
+
+@pytest.mark.parametrize("kind", [*BROKEN_MODELS, "standing"])
+def test_broken_model(tmp_path, capsys, small_model, kind):
+    folder = shutil.copytree(small_model, tmp_path / "3")
+    if kind == "standing":
+        assert load_params().rollout.start_pose == "data"
+        _bad_standing(folder)
+        named = folder / "meta.json"
+    else:
+        named, _ = break_model(folder, kind)
+    out = tmp_path / "out.h5"
+    scenario = next(iter(load_params().rollout.scenarios))
+    assert main(["generate", str(folder), "--scenario", scenario, "-o", str(out)]) == 2
+    _one_line_naming(capsys, named)
     assert not out.exists()

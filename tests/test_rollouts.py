@@ -25,16 +25,18 @@ from pimann.rollout_layout import (
     RolloutKey,
     clip_scenario,
     find_rollouts,
+    model_seeds,
     parse_rollout_path,
     pi_models,
     read_script,
+    rollout_columns,
     rollout_path,
     script_json,
     script_of_json,
     select_rows,
     weight_label,
 )
-from pimann.rollouts import rollout_scripts
+from pimann.rollouts import models_record, rollout_scripts
 from pimann.trajectory import write_collection
 
 EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
@@ -191,3 +193,28 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
         for name in ("base_position", "joint_positions", "joint_velocities"):
             np.testing.assert_allclose(getattr(batched, name), getattr(alone, name), atol=1e-5)
         np.testing.assert_array_equal(batched.contacts, alone.contacts)
+
+
+@pytest.mark.parametrize(
+    "meta, message",
+    [("{pi_weight", "not a model's metadata"), ("[1]", "not a model's metadata"),
+     ('{"seed": 0, "variant": "full"}', "metadata lacks 'pi_weight'")],
+)  # fmt: skip
+def test_a_broken_meta_or_record_is_named(tmp_path, meta, message):
+    """The rollout stage's record of the models, and evaluate's reading of it."""
+    folder = tmp_path / "w10" / "0"
+    folder.mkdir(parents=True)
+    (folder / "meta.json").write_text(meta)
+    with pytest.raises(PimannError, match=message) as raised:
+        models_record(tmp_path / "w10")
+    assert raised.value.path == str(folder / "meta.json")
+    (tmp_path / "w10" / "models.json").write_text(meta)
+    key = RolloutKey("w10", 0, "forward", True)
+    with pytest.raises(PimannError, match="not a rollout record") as raised:
+        rollout_columns(tmp_path, [(key, rollout_path(tmp_path, key))])
+    assert raised.value.path == str(tmp_path / "w10" / "models.json")
+    (tmp_path / "w10" / "best").mkdir()
+    (tmp_path / "w10" / "best" / "meta.json").write_text("{}")
+    with pytest.raises(PimannError, match="not a seed") as raised:
+        model_seeds(tmp_path / "w10")
+    assert raised.value.path == str(tmp_path / "w10" / "best")

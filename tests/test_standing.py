@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 from scipy.spatial.transform import Rotation
 
 from pimann.robot import STANDING_JOINTS
@@ -45,3 +46,13 @@ def test_without_standing_frames_the_nominal_pose_is_kept():
         data_standing([clip(MIN_STANDING_FRAMES - 1, 0.0, STANDING_JOINTS, 0.0)]).origin == "robot"
     )
     assert StandingPose.from_json(None).origin == "robot"
+
+
+def test_a_recorded_pose_of_other_sizes_or_nan_is_refused():
+    good = StandingPose.nominal().to_json()
+    for change in ({"joints": [0.1, 0.2]}, {"roll_pitch": [0.0]},
+                   {"roll_pitch": [float("nan"), 0.0]}):  # fmt: skip
+        with pytest.raises(ValueError, match="standing pose"):
+            StandingPose.from_json({**good, **change})
+    with pytest.raises(KeyError):
+        StandingPose.from_json({"joints": good["joints"]})

@@ -4,21 +4,26 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import io
 import json
+import pickle
+import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from test_features import synthetic_collection
+from test_features import break_features, synthetic_collection
 
 from pimann.errors import PimannError
-from pimann.features import build_dataset, write_dataset
+from pimann.features import Normalisation, build_dataset, window_layout, write_dataset
 from pimann.mann import MANN
 from pimann.params import ModelParams, load_params
 from pimann.train import (
     TrainingLoss,
     epoch_order,
     load_model,
+    save_model,
     schedule_factor,
     train_models,
 )
@@ -151,3 +156,130 @@ def test_pi_term_enters_the_gradient(params, dataset_path):
         pred = model(x)
         assert truth(pred, y)[1] > 0 and loss(pred, y)[1] > 0
         assert not torch.allclose(truth(pred, y)[1], loss(pred, y)[1])
+
+
+def save_small_model(directory: Path) -> Path:
+    """A valid model folder (untrained: only its reading is under test here)."""
+    layout = window_layout(load_params().features, 50.0, "full")
+    n_in, n_out = layout.input_dim, layout.output_dim
+    stats = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
+    model = MANN(n_in, n_out, SMALL_MODEL, seeds=[3])
+    meta = {"pi_weight": 1.0, "seed": 3, "variant": "full", "standing": None,
+            "params": {"model": dataclasses.asdict(SMALL_MODEL)}}  # fmt: skip
+    save_model(directory, model, layout, stats, meta)
+    return directory
+
+
+def _blob(change):
+    """model.pt re-saved after change(its dictionary)."""
+
+    def apply(folder: Path) -> None:
+        blob = torch.load(folder / "model.pt", weights_only=True)
+        change(blob)
+        torch.save(blob, folder / "model.pt")
+
+    return apply
+
+
+def _file(name: str, change=None):
+    """File `name` rewritten as change(its bytes), or removed (None)."""
+
+    def apply(folder: Path) -> None:
+        path = folder / name
+        if change is None:
+            path.unlink()
+        else:
+            path.write_bytes(change(path.read_bytes()))
+
+    return apply
+
+
+def _model(data: bytes):
+    return _file("model.pt", lambda _: data)
+
+
+def _meta(data: bytes):
+    return _file("meta.json", lambda _: data)
+
+
+def _torch_bytes(value) -> bytes:
+    buffer = io.BytesIO()
+    torch.save(value, buffer)
+    return buffer.getvalue()
+
+
+def _first_weight(blob: dict) -> torch.Tensor:
+    return blob["state_dict"]["expert_weight_0"]
+
+
+# kind: (the file named, how a good model folder is broken, what the error says)
+BROKEN_MODELS = {
+    "absent": ("model.pt", _file("model.pt"), "no trained model here"),
+    "empty": ("model.pt", _model(b""), "empty or cut short"),
+    "truncated": ("model.pt", _file("model.pt", lambda data: data[:900]),
+                  "not a PyTorch checkpoint"),
+    "text": ("model.pt", _model(b"weights: 1 2 3\n"), "not a PyTorch checkpoint"),
+    "pickle": ("model.pt", _model(pickle.dumps({"state_dict": {}})), "not a PyTorch checkpoint"),
+    "list": ("model.pt", _model(_torch_bytes([1, 2])), "holds a list, not a trained model"),
+    "lacks_stats": ("model.pt", _blob(lambda b: b.pop("stats")), r"lacks \['stats'\]"),
+    "lacks_weight": ("model.pt", _blob(lambda b: b["state_dict"].pop("expert_bias_0")),
+                     r"state_dict does not fit model_params: lacks \['expert_bias_0'\]"),
+    "wrong_shape": ("model.pt",
+                    _blob(lambda b: b["state_dict"].update(expert_weight_0=torch.zeros(2, 3))),
+                    r"state_dict\['expert_weight_0'\] is \(2, 3\), the model needs"),
+    "other_network": ("model.pt", _blob(lambda b: b["model_params"].update(n_experts=3)),
+                      "state_dict.* the model needs"),
+    "model_params": ("model.pt", _blob(lambda b: b["model_params"].update(depth=3)),
+                     "model_params: .*'depth'"),
+    "nan": ("model.pt", _blob(lambda b: _first_weight(b)[0, 1].fill_(float("nan"))),
+            r"state_dict\['expert_weight_0'\] holds NaN"),
+    "nan_stats": ("model.pt", _blob(lambda b: b["stats"]["y_std"][4].fill_(float("inf"))),
+                  r"stats\['y_std'\] holds NaN"),
+    "stats_shape": ("model.pt", _blob(lambda b: b["stats"].update(x_mean=torch.zeros(5))),
+                    r"stats\['x_mean'\] is \(5,\)"),
+    "layout_not_json": ("model.pt", _blob(lambda b: b.update(layout="{offsets")),
+                        "layout: not a feature layout"),
+    "layout_dims": ("model.pt", _blob(lambda b: b.update(input_dim=b["input_dim"] - 1)),
+                    "do not fit the layout's"),
+    "meta_absent": ("meta.json", _file("meta.json"), "cannot read the model's metadata"),
+    "meta_not_json": ("meta.json", _meta(b"{seed: 3"), "not JSON"),
+    "meta_binary": ("meta.json", _meta(b"\xff\xfe\x00"), "not JSON"),
+    "meta_no_seed": ("meta.json", _meta(b'{"pi_weight": 1.0}'), "no integer 'seed'"),
+    "meta_list": ("meta.json", _meta(b"[3]"), "no integer 'seed'"),
+}  # fmt: skip
+
+
+def break_model(folder: Path, kind: str) -> tuple[Path, str]:
+    """Break the good model folder as `kind`; (the file the error names, what it says)."""
+    name, breaker, message = BROKEN_MODELS[kind]
+    breaker(folder)
+    return folder / name, message
+
+
+@pytest.fixture(scope="module")
+def small_model(tmp_path_factory) -> Path:
+    return save_small_model(tmp_path_factory.mktemp("models") / "3")
+
+
+@pytest.mark.parametrize("kind", BROKEN_MODELS)
+def test_load_model_names_the_file_and_what_is_wrong(tmp_path, small_model, kind):
+    folder = shutil.copytree(small_model, tmp_path / "3")
+    model, layout, stats, meta = load_model(folder)  # the folder reads before it is broken
+    assert model.input_dim == layout.input_dim == len(stats.x_mean) and meta["seed"] == 3
+    named, message = break_model(folder, kind)
+    with pytest.raises(PimannError, match=message) as raised:
+        load_model(folder)
+    assert raised.value.path == str(named) and "\n" not in str(raised.value)
+
+
+@pytest.mark.parametrize("kind", ["truncated", "trajectory", "layout_other_window", "nan"])
+def test_training_on_a_broken_dataset_names_it_and_writes_nothing(
+    tmp_path, params, dataset_path, kind
+):
+    broken = tmp_path / "full.h5"
+    shutil.copy(dataset_path, broken)
+    message = break_features(broken, kind)
+    with pytest.raises(PimannError, match=message) as raised:
+        train_models(broken, tmp_path / "w1", 1.0, [0], params, "cpu", plots_dir=tmp_path / "p")
+    assert raised.value.path == str(broken)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["full.h5"]
