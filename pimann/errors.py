@@ -17,7 +17,7 @@ class PimannError(Exception):
         where = self.path or "<input>"
         if frame is not None:
             where += f" (frame {frame})"
-        super().__init__(f"{where}: {problem}")
+        super().__init__(f"{where}: {self.problem}")
 
     def __reduce__(self):  # keeps the error intact across process pools
         return (_rebuild_error, (self.path, self.problem, self.frame))

@@ -147,3 +147,10 @@ def test_broken_model(tmp_path, capsys, small_model, kind):
     assert main(["generate", str(folder), "--scenario", scenario, "-o", str(out)]) == 2
     _one_line_naming(capsys, named)
     assert not out.exists()
+
+
+def test_an_error_is_one_line_whatever_the_library_said():
+    from pimann.errors import PimannError
+
+    error = PimannError("model.pt", "unpickling failed:\n  line 1\n\tline 2", frame=3)
+    assert str(error) == "model.pt (frame 3): unpickling failed: line 1 line 2"
