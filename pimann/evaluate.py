@@ -20,7 +20,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from tqdm import tqdm
 
 from pimann.atomic import atomic_path, write_text_atomic
 from pimann.claims import (
@@ -33,6 +32,7 @@ from pimann.metrics import aggregate
 from pimann.parallel import pool_map
 from pimann.params import FiguresParams, Params, as_dict
 from pimann.paths import REPO_ROOT
+from pimann.progress import track
 from pimann.rollout_layout import (
     BASELINE,
     MODELS_FILE,
@@ -192,7 +192,7 @@ def write_timeseries(
     robot = load_robot("retarget")
     with atomic_path(out_dir) as tmp:
         tmp.mkdir()
-        for name, key in tqdm(selection.items(), desc="time series"):
+        for name, key in track(selection.items(), "time series", "series", logger=log):
             series = trajectory_time_series(
                 read_trajectory(rollout_path(rollouts_dir, key)), robot, params.evaluate
             )

@@ -359,10 +359,12 @@ def build_dataset(
         log.info("not every clip has contacts: the dataset carries none")
     margin = round(params.contact_margin_s * layout.rate_hz)
     parts: dict[bool, list[tuple[np.ndarray, ...]]] = {False: [], True: []}
+    short = []
     for k, (name, trajectory) in enumerate(clips):
         x, y, steps = clip_features(trajectory, layout)
         if len(steps) == 0:
-            log.info("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
+            log.debug("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
+            short.append(name)
         origin = np.stack([np.full(len(steps), k), steps], axis=1)
         contacts = np.zeros((len(steps), 2), bool)
         if with_contacts:
@@ -377,6 +379,8 @@ def build_dataset(
         x, y, origin, contacts = (np.concatenate(a) for a in zip(*items, strict=True))
         return x, y, origin.astype(np.int64), contacts.astype(bool) if with_contacts else None
 
+    if short:
+        log.info("%d of %d clips are shorter than the windows: no samples", len(short), len(clips))
     x_train, y_train, train_origin, train_contacts = stack(False)
     x_test, y_test, test_origin, test_contacts = stack(True)
     if len(x_train) == 0 or len(x_test) == 0:

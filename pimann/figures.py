@@ -318,5 +318,5 @@ def make_figures(
             if fig is None:
                 continue
             written[name] = save_figure(fig, out_dir, name, results.provenance)
-            log.info("%s -> %s", name, ", ".join(str(p) for p in written[name]))
+            log.debug("%s -> %s", name, ", ".join(str(p) for p in written[name]))
     return written

@@ -67,7 +67,6 @@ from pathlib import Path
 import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
-from tqdm import tqdm
 
 from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
     SECTIONS,
@@ -126,14 +125,12 @@ def generate_batch(
     *,
     contact_params: EvaluateParams | None = None,
     standing: StandingPose | None = None,
-    progress: str | None = None,
     timings: dict[str, float] | None = None,
 ) -> list[Rollout]:
     """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
     `standing`: the pose to start from and return to (default: the robot's nominal one);
-    `progress`: a tqdm bar over the steps with this label; `timings`: seconds per section of
-    the step (`SECTIONS`, "record") are added to it.
+    `timings`: seconds per section of the step (`SECTIONS`, "record") are added to it.
     """
     if not specs:
         return []
@@ -151,7 +148,7 @@ def generate_batch(
            for name in names}  # fmt: skip
     recording = 0.0
     with torch.inference_mode():
-        for k in tqdm(range(n), desc=progress, disable=True if progress is None else None):
+        for k in range(n):
             if k > 0:
                 generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
                                plan.changed[k], plan.active[k])  # fmt: skip
@@ -249,7 +246,6 @@ def _model_rollouts(
     jobs: Sequence[FileJob],
     params: Params,
     batch_size: int = BATCH_SIZE,
-    progress: str | None = None,
 ) -> Iterator[tuple[FileJob, Trajectory]]:
     """The trajectories of `jobs` with one trained model, `batch_size` rollouts at a time.
 
@@ -287,7 +283,7 @@ def _model_rollouts(
         ]  # fmt: skip
         rollouts = generate_batch(
             model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.evaluate, standing=standing, progress=progress,
+            contact_params=params.evaluate, standing=standing,
         )  # fmt: skip
         yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 
@@ -297,14 +293,13 @@ def generate_files(
     jobs: Sequence[FileJob],
     params: Params,
     batch_size: int = BATCH_SIZE,
-    progress: str | None = None,
 ) -> list[Path]:
     """Every job's rollout of one model, generated in batches, each file written atomically."""
     written = []
-    for job, trajectory in _model_rollouts(model_dir, jobs, params, batch_size, progress):
+    for job, trajectory in _model_rollouts(model_dir, jobs, params, batch_size):
         write_trajectory(job.output, trajectory)
         written.append(Path(job.output))
-    log.info("wrote %d rollouts of %s", len(written), model_dir)
+    log.debug("wrote %d rollouts of %s", len(written), model_dir)
     return written
 
 

@@ -1,4 +1,5 @@
-"""Third-party loggers kept quiet, so that a stage's or the CLI's log is the study's own.
+"""What a stage's or the CLI's log shows: the study's own lines, third-party loggers kept quiet,
+detail (per epoch, per item) at DEBUG behind -v, and spawned workers logging like their parent.
 
 Not in pimann.stage: that module is a dependency of the retarget stage, and editing it would
 rerun the whole pipeline.
@@ -6,14 +7,46 @@ rerun the whole pipeline.
 
 from __future__ import annotations
 
+import argparse
 import logging
+
+from pimann.stage import LOG_FORMAT
 
 # libraries that log their internals at INFO: fontTools prints ~900 lines subsetting the fonts
 # of the figures' PDFs, matplotlib's font manager a line per font lookup or cache rebuild
 QUIET_LOGGERS = ("fontTools", "matplotlib", "PIL")
+OURS = "pimann"  # the library's loggers
 
 
 def quiet_third_party(level: int = logging.WARNING) -> None:
     """Raise the third-party loggers of `QUIET_LOGGERS` to `level`; ours stay at INFO."""
     for name in QUIET_LOGGERS:
         logging.getLogger(name).setLevel(level)
+
+
+def add_verbose(parser: argparse.ArgumentParser) -> None:
+    """A stage's -v: its per-epoch and per-item lines (DEBUG) too."""
+    parser.add_argument(
+        "-v", "--verbose", action="store_true", help="log per-epoch and per-item detail too"
+    )
+
+
+def set_verbose(verbose: bool, stage_log: logging.Logger) -> None:
+    """DEBUG for pimann's loggers and the stage's own when `verbose`; not the libraries'."""
+    if verbose:
+        for logger in (logging.getLogger(OURS), stage_log):
+            logger.setLevel(logging.DEBUG)
+
+
+def logging_levels() -> tuple[int, int]:
+    """(root level, pimann's effective level) of this process, for `worker_logging`."""
+    return logging.getLogger().level, logging.getLogger(OURS).getEffectiveLevel()
+
+
+def worker_logging(levels: tuple[int, int]) -> None:
+    """A spawned worker's logging, as its parent's (`logging_levels`): a spawned process starts
+    unconfigured and would drop every INFO line."""
+    root, ours = levels
+    logging.basicConfig(level=root, format=LOG_FORMAT)
+    logging.getLogger(OURS).setLevel(ours)
+    quiet_third_party()

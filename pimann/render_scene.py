@@ -16,7 +16,8 @@ from matplotlib.collections import LineCollection, PolyCollection
 from matplotlib.colors import to_rgba
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from tqdm import tqdm
+
+from pimann.progress import track
 
 LEFT_COLOUR = "#1f5fbf"
 RIGHT_COLOUR = "#d62728"
@@ -202,5 +203,5 @@ class Scene:
         return rgba[..., :3].copy()
 
     def frames(self, count: int, description: str) -> Iterator[np.ndarray]:
-        for n in tqdm(range(count), desc=description, unit="frame", leave=False):
+        for n in track(range(count), description, "frames"):
             yield self.draw(n)

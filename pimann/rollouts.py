@@ -66,9 +66,8 @@ def _generate_seed(
     torch.set_num_threads(1)  # one process per core
     model_dir, files, params = job
     jobs = [FileJob(*file) for file in files]
-    progress = f"{model_dir.parent.name}/{model_dir.name} steps"
     try:
-        generate_files(model_dir, jobs, params, progress=progress)
+        generate_files(model_dir, jobs, params)
     except PimannError as error:
         return str(error)
     return None
@@ -118,7 +117,7 @@ def run_rollouts(
         tmp.mkdir()
         for seed in seeds:
             (tmp / str(seed)).mkdir()
-        failures = pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name} (seeds)")
+        failures = pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name}", "seeds")
         record["failed"] = {
             str(seed): error for seed, error in zip(seeds, failures, strict=True) if error
         }

@@ -35,7 +35,6 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm import tqdm
 
 from pimann.atomic import atomic_path
 from pimann.errors import PimannError, about
@@ -44,8 +43,8 @@ from pimann.mann import MANN
 from pimann.parallel import cpu_workers, pool_map
 from pimann.params import ModelParams, Params, as_dict
 from pimann.physics_loss import PhysicsInformedLoss
+from pimann.progress import Progress
 from pimann.robot import load_robot
-from pimann.stage import LOG_FORMAT
 
 log = logging.getLogger(__name__)
 
@@ -265,20 +264,25 @@ def _train(
     workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds)))
     groups = seed_groups(seeds, workers)
     threads = max(1, torch.get_num_threads() // workers)
+    # one progress for the stage: the first group's (the groups keep pace with each other)
+    progress = f"train {out_dir.name} seeds {groups[0]}"
     jobs = [
         _GroupJob(dataset_path, group, pi_weight, params, str(device), checkpoint_dir,
-                  stop_after, threads if workers > 1 else None, logging.getLogger().level)
-        for group in groups
+                  stop_after, threads if workers > 1 else None, progress if k == 0 else None)
+        for k, group in enumerate(groups)
     ]  # fmt: skip
-    log.info("w=%g: seeds %s in %d process(es)", pi_weight, groups, workers)
-    results = pool_map(_train_group, jobs, workers, f"train w={pi_weight:g}")
+    n = len(data.x_train)
+    if config.max_train_samples is not None:
+        n = min(n, config.max_train_samples)
+    log.info(
+        "%s (w=%g, %s data, %d of %d training samples): seeds %s in %d process(es)",
+        out_dir.name, pi_weight, data.layout.variant, n, len(data.x_train), groups, workers,
+    )  # fmt: skip
+    results = pool_map(_train_group, jobs, workers, None)
     if any(result is None for result in results):
         return {}  # stopped early (stop_after)
     members = {seed: member for result in results for seed, member in result.items()}
 
-    n = len(data.x_train)
-    if config.max_train_samples is not None:
-        n = min(n, config.max_train_samples)
     metas = {}
     with atomic_path(out_dir) as tmp:
         for seed in seeds:
@@ -316,7 +320,7 @@ class _GroupJob:
     checkpoint_dir: Path
     stop_after: int | None
     threads: int | None  # torch threads of a worker process; None: leave as is
-    log_level: int
+    progress: str | None  # the label of the group that reports the stage's progress
 
 
 def _train_group(job: _GroupJob) -> dict[int, dict] | None:
@@ -326,7 +330,6 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
     """
     if job.threads is not None:  # a spawned worker
         torch.set_num_threads(job.threads)
-        logging.basicConfig(level=job.log_level, format=LOG_FORMAT)
     with _deterministic():
         return _train_ensemble(job)
 
@@ -346,7 +349,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
         if data.train_contacts is not None:
             data.train_contacts = data.train_contacts[keep]
-        log.info("training on %d evenly spaced of the training samples", len(keep))
+        log.debug("training on %d evenly spaced of the training samples", len(keep))
     x_train, y_train, x_test, y_test = (
         torch.as_tensor(a, dtype=torch.float32, device=device)
         for a in (data.x_train, data.y_train, data.x_test, data.y_test)
@@ -388,11 +391,11 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
 
     with_pi_train = pi_weight != 0.0
     last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
-    progress = tqdm(
-        range(state.epoch, last), initial=state.epoch, total=config.epochs,
-        desc=f"train w={pi_weight:g} seeds {seeds}", unit="epoch", disable=None,
+    progress = Progress(
+        config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
+        enabled=job.progress is not None,
     )  # fmt: skip
-    for epoch in progress:
+    for epoch in range(state.epoch, last):
         factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
         for group in optimizer.param_groups:
             group["lr"] = config.learning_rate * factor
@@ -431,8 +434,8 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
                 for name, value in model.state_dict().items():
                     state.best[name][k] = value[k].detach()
         mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
-        progress.set_postfix(train=f"{mean['train_loss']:.4f}", test=f"{mean['test_loss']:.4f}")
-        log.info(
+        progress.update(postfix=f"train {mean['train_loss']:.4f}, test {mean['test_loss']:.4f}")
+        log.debug(
             "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, "
             "pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
             *(mean[c] for c in LOSS_COLUMNS),

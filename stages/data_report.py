@@ -10,8 +10,8 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.data_report import data_report, report_table, write_report
-from pimann.logs import quiet_third_party
+from pimann.data_report import data_report, write_report
+from pimann.logs import add_verbose, quiet_third_party, set_verbose
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -27,7 +27,9 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--collection", type=Path, default=None, help="default: features.input")
     parser.add_argument("--out", type=Path, default=Path("results/data_report"))
     parser.add_argument("--workers", type=int, default=2)
+    add_verbose(parser)
     args = parser.parse_args(argv)
+    set_verbose(args.verbose, log)
     params = load_params()
     collection = REPO_ROOT / (args.collection or Path(params.features.input))
     started = time.perf_counter()
@@ -37,8 +39,9 @@ def main(argv: list[str] | None = None) -> None:
     out = REPO_ROOT / args.out
     paths = [out.with_suffix(suffix) for suffix in (".json", ".md", ".png")]
     write_report(report, *paths, params.figures)
-    log.info("profile %s: reported in %.0f s", params.profile, time.perf_counter() - started)
-    print(report_table(report))
+    # the table is the .md file (and the report page's section): not repeated in the log
+    log.info("profile %s: %s.{json,md,png} in %.0f s", params.profile, args.out,
+             time.perf_counter() - started)  # fmt: skip
 
 
 if __name__ == "__main__":

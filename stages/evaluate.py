@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from pimann.evaluate import evaluate_all
-from pimann.logs import quiet_third_party
+from pimann.logs import add_verbose, quiet_third_party, set_verbose
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -29,15 +29,21 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--data", type=Path, help="retargeted collection (default: features.input)")
+    add_verbose(parser)
     args = parser.parse_args(argv)
+    set_verbose(args.verbose, log)
     params = load_params()
     started = time.perf_counter()
     claims = evaluate_all(
         REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers),
         args.data,
     )  # fmt: skip
-    for claim in claims:
-        log.info("%s %s: %s", claim.id, claim.status, claim.claim)
+    by_status: dict[str, list[str]] = {}
+    for claim in claims:  # one line each with -v; the statements are in claims.md
+        log.debug("%s %s: %s", claim.id, claim.status, claim.claim)
+        by_status.setdefault(claim.status, []).append(claim.id)
+    statuses = "; ".join(f"{status} {' '.join(ids)}" for status, ids in by_status.items())
+    log.info("claims (%s): %s", args.results / "claims.md", statuses)
     log.info("profile %s: evaluated in %.0f s", params.profile, time.perf_counter() - started)
 
 

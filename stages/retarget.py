@@ -14,13 +14,12 @@ import sys
 import time
 from multiprocessing import Pool
 
-from tqdm import tqdm
-
 from pimann.atomic import write_text_atomic
 from pimann.mocap.clips import select_takes
 from pimann.mocap.mirror import mirror_trajectory
 from pimann.params import as_dict, load_params
 from pimann.paths import REPO_ROOT
+from pimann.progress import track
 from pimann.retarget import retarget_clip
 from pimann.retarget.quality import quality_report, summarize
 from pimann.stage import stage_entry
@@ -49,7 +48,7 @@ def main(argv: list[str] | None = None) -> None:
     results: list[list] = [[] for _ in takes]
     with Pool(params.retarget.workers) as pool:
         done = pool.imap_unordered(work, order)
-        for index, take_results in tqdm(done, total=len(takes), desc="retarget"):
+        for index, take_results in track(done, "retarget", "takes", total=len(takes), logger=log):
             results[index] = take_results
     wall = time.perf_counter() - started
     clips = [clip for take_clips in results for clip in take_clips]

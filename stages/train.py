@@ -1,11 +1,12 @@
 """DVC stage `train` (one PI weight, every seed) and `train_baseline`.
 
     python stages/train.py --pi-weight 10 --variant full --out models/w10 \
-        --plots results/training/w10
+        --plots results/training/w10 [-v]
 
 trains the seeds `train.seeds` of one weight as one vectorised ensemble and writes
 <out>/<seed>/{model.pt,meta.json} and <plots>/seed<seed>.csv. An interrupted run resumes from
-its per-epoch checkpoint in <out's parent>/.checkpoints/<out's name>/.
+its per-epoch checkpoint in <out's parent>/.checkpoints/<out's name>/. The log names the run
+after <out> (w10, baseline): its progress over the epochs, and with -v every epoch's losses.
 """
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ import time
 from pathlib import Path
 
 from pimann.features import VARIANTS
+from pimann.logs import add_verbose, set_verbose
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry
@@ -32,13 +34,15 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--variant", choices=VARIANTS, default="full")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--plots", type=Path, required=True)
+    add_verbose(parser)
     args = parser.parse_args(argv)
+    set_verbose(args.verbose, log)
     params = load_params()
     dataset = REPO_ROOT / params.features.output_dir / f"{args.variant}.h5"
     device = pick_device(params.train.device)
     log.info(
-        "profile %s: w=%g, seeds %s, %d epochs on %s, data %s",
-        params.profile, args.pi_weight, params.train.seeds, params.train.epochs,
+        "profile %s: %s, w=%g, seeds %s, %d epochs on %s, data %s",
+        params.profile, args.out.name, args.pi_weight, params.train.seeds, params.train.epochs,
         device, dataset,
     )  # fmt: skip
     started = time.perf_counter()
@@ -46,10 +50,12 @@ def main(argv: list[str] | None = None) -> None:
         dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
         device, plots_dir=REPO_ROOT / args.plots,
     )  # fmt: skip
-    for seed, meta in metas.items():
-        log.info("seed %d: best epoch %d, test loss %.5f", seed, meta["best_epoch"],
-                 meta["best_test_loss"])  # fmt: skip
-    log.info("trained in %.0f s", time.perf_counter() - started)
+    best = ", ".join(
+        f"{seed}: {meta['best_epoch']} ({meta['best_test_loss']:.5f})"
+        for seed, meta in metas.items()
+    )
+    log.info("trained in %.0f s; best epoch (test loss) of seed %s", time.perf_counter() - started,
+             best)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -190,5 +190,5 @@ def plan_dcm(
         raise PimannError(None, f"DCM/ZMP plan violates the LIPM by {residual:.1e}")
     com = np.column_stack([states[0], states[1], np.full(n + 1, params.com_height)])
     velocity = np.column_stack([states[2], states[3], np.zeros(n + 1)])
-    log.info("DCM plan: %d knots over %.1f s", n, plan.duration)
+    log.debug("DCM plan: %d knots over %.1f s", n, plan.duration)
     return DCMPlan(time, com, velocity, zmp_values, omega, support)

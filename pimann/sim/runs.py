@@ -17,6 +17,7 @@ from pimann.atomic import atomic_path, write_text_atomic
 from pimann.errors import PimannError, about
 from pimann.params import Params, SimulateRun, as_dict
 from pimann.paths import REPO_ROOT
+from pimann.progress import track
 from pimann.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
 from pimann.sim.results import write_simulation
 from pimann.sim.run import simulate_trajectory
@@ -63,15 +64,14 @@ def simulate_runs(
     runs: dict[str, Any] = {}
     with atomic_path(out_dir) as tmp:
         tmp.mkdir()
-        for k, (run, path) in enumerate(jobs):
+        for run, path in track(jobs, "simulate", "runs", logger=log):
             name = run_name(run)
             provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
                           "steering": run.steering, "rollout": _relative(path)}  # fmt: skip
             try:
                 with about(path, f"simulate run {name}"):
                     trajectory = read_trajectory(path)
-                    log.info("[%d/%d] %s: %.1f s generated", k + 1, len(jobs), name,
-                             trajectory.time[-1])  # fmt: skip
+                    log.debug("%s: %.1f s generated", name, trajectory.time[-1])
                     result = simulate_trajectory(trajectory, sim)
             except PimannError as error:  # recorded, the other runs go on
                 log.warning("%s", error)
@@ -81,7 +81,7 @@ def simulate_runs(
                 tmp / f"{name}.h5", result, sim, source=_relative(path),
                 rate_hz=sim.output_rate_hz, attrs=provenance,
             )  # fmt: skip
-            log.info(
+            log.debug(
                 "%s: success %s, %d steps, walked %.2f m of %.2f m, joint RMSE %.4f rad, ZMP "
                 "outside %.3f m, slip %.4f m, RTF %.1fx", name, summary["success"],
                 summary["steps"], summary["distance_walked_m"], summary["distance_planned_m"],
@@ -98,6 +98,10 @@ def simulate_runs(
     failed = sorted(name for name, run in runs.items() if "failed" in run)
     if failed:
         log.warning("%d of %d runs failed: %s", len(failed), len(runs), ", ".join(failed))
+    fell = [f"{name} at {run['fall_time_s']:.1f} s" for name, run in runs.items()
+            if run.get("fall_time_s") is not None]  # fmt: skip
+    log.info("%d of %d runs succeeded; fell: %s", sum(bool(run.get("success")) for run in
+             runs.values()), len(runs), ", ".join(fell) or "none")  # fmt: skip
     record = {"profile": params.profile, "failed_runs": failed, "runs": runs,
               "params": {"simulate": as_dict(sim)}}  # fmt: skip
     record = _json_ready(record)

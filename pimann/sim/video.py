@@ -106,7 +106,7 @@ def render_simulation(
         frames = np.arange(0, len(clock), every_n_frames)
     span = clock[-1] - clock[0] if len(clock) > 1 else 0.0
     fps = (len(clock) - 1) / span / every_n_frames if span > 0 else 25.0
-    log.info("rendering %d frames of %s to %s", len(frames), trajectory.source, output_path)
+    log.debug("rendering %d frames of %s to %s", len(frames), trajectory.source, output_path)
     try:
         write_pictures(output_path, _mujoco_frames(sim, renderer, trajectory, frames), fps)
     finally:
