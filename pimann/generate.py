@@ -67,6 +67,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
+from threadpoolctl import threadpool_limits
 from tqdm import tqdm
 
 from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
@@ -150,7 +151,9 @@ def generate_batch(
                           dtype=np.asarray(getattr(generator, name)).dtype)
            for name in names}  # fmt: skip
     recording = 0.0
-    with torch.inference_mode():
+    # numpy's BLAS on one thread: a product of one sample is too small to share, and on a
+    # loaded machine each wake-up of a second thread waits for a core (3 s a rollout, not 0.1)
+    with torch.inference_mode(), threadpool_limits(1, user_api="blas"):
         for k in tqdm(range(n), desc=progress, disable=True if progress is None else None):
             if k > 0:
                 generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
