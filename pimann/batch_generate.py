@@ -25,6 +25,7 @@ from pimann.contacts import SchmittTrigger
 from pimann.errors import PimannError
 from pimann.features import FeatureLayout, Normalisation
 from pimann.leg_odometry import Odometry
+from pimann.mann import MANN
 from pimann.params import EvaluateParams, RolloutParams
 from pimann.robot import Robot
 from pimann.rotations import rot_z, yaw_of, yaw_only
@@ -47,26 +48,79 @@ def _interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:
     return matrix
 
 
+class NumpyMANN:
+    """`MANN.forward` of a one-member CPU model in numpy, the same parameters and operations.
+
+    A rollout alone calls the network with one sample a step, where torch's per-operation
+    overhead and MKL's matrix-vector products (the 512 x 2048 layer: 100 us on one core of an
+    AMD EPYC, OpenBLAS 55 us) make torch twice numpy's time (about 120 us a step in numpy;
+    6 MB of float32 weights read a step); a batch is as fast either way and keeps torch.
+    Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generate.py). A
+    snapshot: later changes to the model's parameters are not seen.
+    """
+
+    def __init__(self, model: MANN):
+        if model.ensemble != 1:
+            raise ValueError(f"one member, not an ensemble of {model.ensemble}")
+        member = {name: value[0].detach().cpu().numpy().copy()
+                  for name, value in model.state_dict().items()}  # fmt: skip
+        self.n_experts = model.n_experts
+        self.gate = [(member[f"gate_weight_{i}"].T.copy(), member[f"gate_bias_{i}"])
+                     for i in range(model.n_gate_layers)]  # fmt: skip
+        self.experts = [(member[f"expert_weight_{i}"], member[f"expert_bias_{i}"])
+                        for i in range(model.n_expert_layers)]  # fmt: skip
+
+    @staticmethod
+    def _elu(h: np.ndarray) -> np.ndarray:
+        return np.maximum(h, 0) + np.expm1(np.minimum(h, 0))
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        """y (B, out) for x (B, in), in the model's dtype."""
+        h = x
+        for i, (weight, bias) in enumerate(self.gate):
+            h = h @ weight + bias
+            if i < len(self.gate) - 1:
+                h = self._elu(h)
+        h = np.exp(h - h.max(axis=-1, keepdims=True))
+        theta = (h / h.sum(axis=-1, keepdims=True))[:, None]  # (B, 1, K)
+        h = x
+        for i, (weight, bias) in enumerate(self.experts):
+            out = (h @ weight + bias).reshape(len(x), self.n_experts, -1)
+            h = (theta @ out)[:, 0]  # sum_j theta_j (W_j h + b_j)
+            if i < len(self.experts) - 1:
+                h = self._elu(h)
+        return h
+
+
 class _Network:
     """x (B, in) -> y (B, out), physical units, in the model's dtype; call in inference mode.
 
     At batch 1 the conversions cost as much as a small layer: numpy casts to the model's
-    dtype, and the caller holds one `torch.inference_mode` over the whole rollout.
+    dtype, and the caller holds one `torch.inference_mode` over the whole rollout. `rows` 1
+    with a one-member MANN on the CPU: `NumpyMANN` (half the time of torch at batch 1).
     """
 
-    def __init__(self, model: torch.nn.Module, layout: FeatureLayout, stats: Normalisation):
+    def __init__(
+        self, model: torch.nn.Module, layout: FeatureLayout, stats: Normalisation, rows: int
+    ):
         self.model = model.eval()
         parameter = next(model.parameters(), None)
         dtype = torch.float32 if parameter is None else parameter.dtype
         self.device = None if parameter is None or parameter.device.type == "cpu" else parameter
         self.np_dtype = torch.empty(0, dtype=dtype).numpy().dtype
+        self.numpy = None
+        if rows == 1 and self.device is None and isinstance(model, MANN) and model.ensemble == 1:
+            self.numpy = NumpyMANN(model)
         self.x_mean, self.x_scale = stats.x_mean.astype(float), 1.0 / stats.x_std.astype(float)
         self.y_mean, self.y_std = stats.y_mean.astype(float), stats.y_std.astype(float)
         if len(self.x_mean) != layout.input_dim or len(self.y_mean) != layout.output_dim:
             raise PimannError(None, "normalisation statistics do not match the feature layout")
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
-        tensor = torch.from_numpy(((x - self.x_mean) * self.x_scale).astype(self.np_dtype))
+        x = ((x - self.x_mean) * self.x_scale).astype(self.np_dtype)
+        if self.numpy is not None:
+            return self.numpy(x) * self.y_std + self.y_mean  # float64
+        tensor = torch.from_numpy(x)
         if self.device is not None:
             tensor = tensor.to(self.device.device)
         y = self.model(tensor)
@@ -88,7 +142,7 @@ class BatchGenerator:
 
     Per step only what some row needs is computed (a stop check while a row stands, the blend
     while a row returns to standing, steering for steered rows): one rollout alone costs
-    little more than the old one-rollout generator, and a batch shares the fixed cost.
+    little more than a one-rollout generator would, and a batch shares the fixed cost.
     """
 
     def __init__(
@@ -103,12 +157,13 @@ class BatchGenerator:
         standing: StandingPose,
     ):
         rows = len(steering)
-        self.params, self.network = params, _Network(model, layout, stats)
+        self.params, self.network = params, _Network(model, layout, stats, rows)
         self.steering = np.asarray(steering, dtype=bool)
         self.standing_joints = standing.joints.copy()
         self.dt = 1.0 / float(layout.rate_hz)
         self.projected = layout.variant == "ground_projected"
-        self.layout, self.xs, self.ys = layout, layout.x_slices, layout.y_slices
+        self.layout, self.xs, self.ys = layout, layout.x_slices, layout.y_slices  # computed
+        self.input_dim = layout.input_dim
         in_offsets = np.asarray(layout.input_offsets)
         out_offsets = np.asarray(layout.output_offsets, dtype=float)
         self.current = layout.current_output
@@ -252,7 +307,7 @@ class BatchGenerator:
     def _inputs(self, rows: np.ndarray | slice, index: np.ndarray) -> np.ndarray:
         """x of the walking rows: velocity windows, joints, fed-back pose."""
         xs, n = self.xs, len(index)
-        x = np.empty((n, self.layout.input_dim))
+        x = np.empty((n, self.input_dim))
         taken = (self.head[index, None] + self.past_offsets) % self.history_length
         past = self.history[index[:, None], taken] @ self.rotation[rows, None]  # v -> R^T v
         future = self.future_matrix @ self.future[rows]  # (n, 2, F, 3)

@@ -47,18 +47,20 @@ frame: the base orientation keeps yaw only (roll and pitch 0), as in its trainin
 Batches. These rules run in pimann.batch_generate, vectorised over rollouts of one model (one
 network call per step for every walking row, vectorised leg odometry (pimann.leg_odometry),
 contacts and steering; each row its own script, stops and restarts). `generate_rollout` is a
-batch of one, so a rollout alone equals its row of any batch (to rounding: the network's BLAS
-rounds a row differently at other batch sizes, 1e-16 in float64). The rollout stage
-(pimann.rollouts.run_rollouts) generates one batch per seed (`generate_files`). Measured
-(benchmarks/generate_speed.py: full-size MANN, 1 thread, both cores loaded by a training run):
-a 10-s rollout alone 0.40 s (0.46 s steered; the network is ~55% of it, the one-rollout
-generator before cost the same side by side), 0.050 s amortised over a batch of 32 (200x real
-time); a full set of 68 rollouts 4.6x faster batched than one at a time.
+batch of one, so a rollout alone equals its row of any batch (to rounding: alone, a MANN runs
+in numpy (`batch_generate.NumpyMANN`), in a batch in torch, and BLAS rounds a row differently
+at other batch sizes; 1e-16 in float64). The rollout stage (pimann.rollouts.run_rollouts)
+generates one batch per seed (`generate_files`). Measured (benchmarks/generate_speed.py:
+full-size MANN, 1 thread, 2 cores shared with other processes, load 1-3): a 10-s rollout
+alone 0.14-0.15 s (0.15-0.16 s steered; the network ~47% of it), against 0.25-0.27 s
+(0.26-0.28 s) with the torch network at batch 1 side by side; 0.04-0.07 s amortised over a
+batch of 32.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import time
 from collections.abc import Iterator, Sequence
@@ -67,6 +69,7 @@ from pathlib import Path
 import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
+from threadpoolctl import ThreadpoolController
 
 from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
     SECTIONS,
@@ -147,7 +150,9 @@ def generate_batch(
                           dtype=np.asarray(getattr(generator, name)).dtype)
            for name in names}  # fmt: skip
     recording = 0.0
-    with torch.inference_mode():
+    # numpy's BLAS on one thread: a product of one sample is too small to share, and on a
+    # loaded machine each wake-up of a second thread waits for a core (3 s a rollout, not 0.1)
+    with torch.inference_mode(), _blas().limit(limits=1, user_api="blas"):
         for k in range(n):
             if k > 0:
                 generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
@@ -177,6 +182,12 @@ def generate_batch(
         )
         rollouts.append(Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"]))
     return rollouts
+
+
+@functools.cache
+def _blas() -> ThreadpoolController:
+    """The process's thread pools, found once (a search of the loaded libraries: 7 ms)."""
+    return ThreadpoolController()
 
 
 def generate_rollout(

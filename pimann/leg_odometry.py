@@ -69,7 +69,8 @@ class Odometry:
         self.frames = SoleFrames(robot)
         self.corners = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homog.
         self.rows = np.arange(rows)
-        self.support = np.zeros((rows, 2), dtype=int)
+        self.support_foot = np.zeros(rows, dtype=int)  # the support corner: its foot,
+        self.support_corner = np.zeros(rows, dtype=int)  # and which of its corners
         self.anchor = np.zeros((rows, 3))
         self.world_corners = np.zeros((rows, len(FEET), 3, len(SOLE_CORNERS)))
 
@@ -86,19 +87,19 @@ class Odometry:
         """
         rotated = self.rotated_corners(rotation, joints)
         heights = rotated[:, :, 2]  # (B, 2, C)
-        foot = np.argmin(heights.min(axis=2), axis=1)
-        corner = np.argmin(heights[self.rows, foot], axis=1)
+        foot = heights.min(axis=2).argmin(axis=1)
+        corner = heights[self.rows, foot].argmin(axis=1)
         support_point = rotated[self.rows, foot, :, corner]  # (B, 3)
         if first is not None:
             position = first
             self.anchor = first + support_point
         else:
-            moved = (foot != self.support[:, 0]) | (corner != self.support[:, 1])
+            moved = (foot != self.support_foot) | (corner != self.support_corner)
             if moved.any():  # pin the new support point on the ground
                 anchor = self.world_corners[self.rows, foot, :, corner]
                 anchor[:, 2] = 0.0
                 self.anchor = np.where(moved[:, None], anchor, self.anchor)
             position = self.anchor - support_point
-        self.support = np.stack([foot, corner], axis=1)
+        self.support_foot, self.support_corner = foot, corner
         self.world_corners = rotated + position[:, None, :, None]
         return position, self.world_corners[:, :, 2].min(axis=2), foot

@@ -18,6 +18,8 @@ import numpy as np
 
 from pimann.rotations import yaw_of
 
+_EYE = np.eye(3)
+
 
 def skew_part(matrices: np.ndarray) -> np.ndarray:
     """(A - A^T) / 2 over the last two axes."""
@@ -140,7 +142,7 @@ def exp_so3(omega: np.ndarray) -> np.ndarray:
     theta = np.sqrt((omega * omega).sum(axis=1)) + 1e-300
     half = 0.5 * theta
     a, b = np.sin(theta) / theta, np.sin(half) / half
-    skew = np.zeros((len(omega), 3, 3))
-    skew[:, 2, 1], skew[:, 0, 2], skew[:, 1, 0] = omega[:, 0], omega[:, 1], omega[:, 2]
-    skew[:, 1, 2], skew[:, 2, 0], skew[:, 0, 1] = -omega[:, 0], -omega[:, 1], -omega[:, 2]
-    return np.eye(3) + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)
+    skew = np.zeros((len(omega), 9))  # [w]x, row-major
+    skew[:, [7, 2, 3]], skew[:, [5, 6, 1]] = omega, -omega
+    skew = skew.reshape(-1, 3, 3)
+    return _EYE + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)

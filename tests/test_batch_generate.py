@@ -14,12 +14,14 @@ import pytest
 import torch
 from test_generate import IDENTITY, LAYOUT, GaitModel
 
+from pimann.batch_generate import BatchGenerator, NumpyMANN
 from pimann.contacts import FEET
 from pimann.features import Normalisation, clip_features
 from pimann.generate import RolloutSpec, generate_batch, generate_rollout
 from pimann.leg_odometry import SoleFrames
 from pimann.mann import MANN
 from pimann.params import ModelParams, MotionSegment, StandSegment
+from pimann.standing import StandingPose
 
 M, S = MotionSegment, StandSegment
 SCRIPTS = [
@@ -41,18 +43,20 @@ def test_sole_frames_match_pinocchio(robot, rng):
             np.testing.assert_allclose(rotations[row, column], placement.rotation, atol=1e-12)
 
 
-def assert_same_rollout(alone, row) -> None:
+def assert_same_rollout(alone, row, tolerance: float = 1e-9) -> None:
     a, b = alone.trajectory, row.trajectory
     assert len(a) == len(b) and a.attrs == b.attrs and a.source == b.source
     for name in ("base_position", "base_quaternion_xyzw", "joint_positions", "joint_velocities"):
-        np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=tolerance)
     np.testing.assert_array_equal(b.contacts, a.contacts)
-    np.testing.assert_allclose(row.goals, alone.goals, rtol=0, atol=1e-9)  # NaN at frame 0
+    np.testing.assert_allclose(row.goals, alone.goals, rtol=0, atol=tolerance)  # NaN at 0
     np.testing.assert_array_equal(row.stopped, alone.stopped)
     np.testing.assert_array_equal(row.support, alone.support)
 
 
-def batch_against_alone(model, stats, params, robot, scripts=SCRIPTS, **changes) -> list:
+def batch_against_alone(
+    model, stats, params, robot, scripts=SCRIPTS, tolerance: float = 1e-9, **changes
+) -> list:
     """Every script with and without steering in one batch; each row against its rollout."""
     rollout_params = dataclasses.replace(params.rollout, **changes)
     pairs = [(script, steering) for steering in (False, True) for script in scripts]
@@ -65,7 +69,7 @@ def batch_against_alone(model, stats, params, robot, scripts=SCRIPTS, **changes)
             model, LAYOUT, stats, spec.script, rollout_params, spec.steering, robot,
             contact_params=params.evaluate, source=spec.source, attrs=spec.attrs,
         )  # fmt: skip
-        assert_same_rollout(alone, row)
+        assert_same_rollout(alone, row, tolerance)
     return rows
 
 
@@ -91,10 +95,10 @@ def test_gait_rows_equal_their_rollouts_alone(robot, params, held):
     assert min(moved) > 0.2  # every row walked
 
 
-def test_trained_mann_rows_equal_their_rollouts_alone(robot, params):
-    """A MANN trained on the gait's forward walk with a stop, rolled out in its range (a badly
-    fitted model diverges chaotically, where BLAS rounding that depends on the batch size,
-    1e-16, grows without bound: a model's flaw, not the batch's)."""
+@pytest.fixture(scope="module")
+def trained(robot, params) -> tuple[MANN, Normalisation]:
+    """A float64 MANN trained on the gait's forward walk with a stop, and its statistics."""
+    threads = torch.get_num_threads()
     torch.set_num_threads(1)
     walk = M(3.0, 0.5, 0.0, 0.0)
     data = generate_rollout(
@@ -114,14 +118,56 @@ def test_trained_mann_rows_equal_their_rollouts_alone(robot, params):
         loss = torch.mean((model(xn) - yn) ** 2)
         loss.backward()
         optimiser.step()
+    torch.set_num_threads(threads)
     assert loss.item() < 0.01
+    return model.eval(), stats
+
+
+@pytest.mark.parametrize(("dtype", "tolerance"), [(torch.float64, 1e-9), (torch.float32, 1e-3)])
+def test_trained_mann_rows_equal_their_rollouts_alone(robot, params, trained, dtype, tolerance):
+    """Rolled out in its range (a badly fitted model diverges chaotically, where BLAS rounding
+    that depends on the batch size, 1e-16, grows without bound: a model's flaw, not the
+    batch's). Alone, the network runs in numpy (`NumpyMANN`), in a batch in torch. In float32
+    the network's rounding (1e-7) grows along these rollouts to 1e-4 in joint velocities
+    (2e-5 in joints), as much as torch's own rounding differs between batch sizes; contacts,
+    stops and support feet stay identical."""
+    torch.set_num_threads(1)
+    model, stats = trained
+    model = MANN.member(model, 0).to(dtype).eval()  # a copy in `dtype`
     scripts = [
         [S(0.3, True), M(1.5, 0.5, 0.0, 0.0), S(1.0, True), M(1.0, 0.5, 0.0, 0.0)],
         [M(2.5, 0.5, 0.0, 0.0)],
         [M(0.8, 0.5, 0.0, 0.0), S(1.5, True)],
         [S(0.5, True), M(1.2, 0.4, 0.0, 0.0)],
     ]
-    rows = batch_against_alone(model.eval(), stats, params, robot, scripts)
+    rows = batch_against_alone(model, stats, params, robot, scripts, tolerance=tolerance)
     for row in (rows[0], rows[4]):  # walks at 16, stops during the 'stand', walks again
         changes = np.flatnonzero(np.diff(row.stopped.astype(int)))
         assert len(changes) == 3 and changes[0] == 15
+
+
+@pytest.mark.parametrize(("dtype", "tolerance"), [(torch.float64, 1e-13), (torch.float32, 1e-6)])
+def test_numpy_mann_equals_forward(params, dtype, tolerance):
+    """The full-size network of params.yaml, one sample at a time and a batch."""
+    model = MANN(LAYOUT.input_dim, LAYOUT.output_dim, params.model, seeds=[7]).to(dtype).eval()
+    x = torch.randn(6, LAYOUT.input_dim, dtype=dtype, generator=torch.Generator().manual_seed(0))
+    with torch.inference_mode():
+        expected = model(x).numpy()
+    network = NumpyMANN(model)
+    for row in range(len(x)):
+        y = network(x[row : row + 1].numpy())
+        assert y.dtype == expected.dtype
+        np.testing.assert_allclose(y, expected[row : row + 1], rtol=0, atol=tolerance)
+    np.testing.assert_allclose(network(x.numpy()), expected, rtol=0, atol=tolerance)
+    assert np.abs(expected).max() > 0.05  # outputs well above the tolerance
+
+
+def test_a_rollout_alone_runs_its_network_in_numpy(robot, params, trained):
+    model, stats = trained
+    generators = [
+        BatchGenerator(model, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
+                       params.evaluate, StandingPose.nominal())
+        for rows in (1, 2)
+    ]  # fmt: skip
+    assert isinstance(generators[0].network.numpy, NumpyMANN)
+    assert generators[1].network.numpy is None  # a batch: torch
