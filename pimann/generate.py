@@ -88,6 +88,7 @@ from pimann.params import (
     StandSegment,
     load_params,
 )
+from pimann.paths import repo_relative
 from pimann.robot import Robot, load_robot
 from pimann.standing import StandingPose
 from pimann.trajectory import Trajectory, write_trajectory
@@ -285,8 +286,8 @@ def _model_rollouts(
         chunk = ordered[first : first + batch_size]
         specs = [
             RolloutSpec(
-                list(job.script), job.steering, f"{model_dir}:{job.scenario}",
-                {"scenario": job.scenario, "model_dir": str(model_dir),
+                list(job.script), job.steering, f"{repo_relative(model_dir)}:{job.scenario}",
+                {"scenario": job.scenario, "model_dir": repo_relative(model_dir),
                  SCRIPT_ATTR: script_json(job.script), **model_attrs,
                  "start_pose": standing.origin},
             )

@@ -67,3 +67,10 @@ def bandai_label_files(bvh: Path) -> tuple[Path, Path, Path]:
     dataset_dir = bvh.parent.parent
     cfg = dataset_dir / "cfg"
     return bvh.with_suffix(".json"), cfg / "content_label.txt", cfg / "style_label.txt"
+
+
+def repo_relative(path: str | Path) -> str:
+    """A path as results record it: relative to the repository when inside it (a run's files
+    read the same on every machine), else absolute."""
+    path = Path(path).resolve()
+    return str(path.relative_to(REPO_ROOT)) if path.is_relative_to(REPO_ROOT) else str(path)

@@ -22,3 +22,10 @@ def test_shared_dir_follows_the_setting(monkeypatch, tmp_path):
     monkeypatch.delenv(SHARED_ENV)
     assert shared_dir().name == "shared" and (shared_dir() / "robots").is_dir()
     assert shared_dir() == (project_root().parent / "shared").resolve()
+
+
+def test_repo_relative_paths(tmp_path):
+    from pimann.paths import REPO_ROOT, repo_relative
+
+    assert repo_relative(REPO_ROOT / "models" / "w10" / "0") == "models/w10/0"
+    assert repo_relative(tmp_path / "x.h5") == str((tmp_path / "x.h5").resolve())

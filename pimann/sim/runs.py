@@ -16,7 +16,7 @@ from typing import Any
 from pimann.atomic import atomic_path, write_text_atomic
 from pimann.errors import PimannError, about
 from pimann.params import Params, SimulateRun, as_dict
-from pimann.paths import REPO_ROOT
+from pimann.paths import repo_relative
 from pimann.progress import track
 from pimann.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
 from pimann.sim.results import write_simulation
@@ -67,7 +67,7 @@ def simulate_runs(
         for run, path in track(jobs, "simulate", "runs", logger=log):
             name = run_name(run)
             provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
-                          "steering": run.steering, "rollout": _relative(path)}  # fmt: skip
+                          "steering": run.steering, "rollout": repo_relative(path)}  # fmt: skip
             try:
                 with about(path, f"simulate run {name}"):
                     trajectory = read_trajectory(path)
@@ -78,7 +78,7 @@ def simulate_runs(
                 runs[name] = {**provenance, "success": False, "failed": str(error)}
                 continue
             summary = write_simulation(
-                tmp / f"{name}.h5", result, sim, source=_relative(path),
+                tmp / f"{name}.h5", result, sim, source=repo_relative(path),
                 rate_hz=sim.output_rate_hz, attrs=provenance,
             )  # fmt: skip
             log.debug(
@@ -107,9 +107,3 @@ def simulate_runs(
     record = _json_ready(record)
     write_text_atomic(summary_path, json.dumps(record, indent=2) + "\n")
     return record
-
-
-def _relative(path: Path) -> str:
-    """A rollout's path as recorded in results: relative to the repository when inside it."""
-    path = Path(path).resolve()
-    return str(path.relative_to(REPO_ROOT)) if path.is_relative_to(REPO_ROOT) else str(path)
