@@ -54,7 +54,8 @@ class NumpyMANN:
     A rollout alone calls the network with one sample a step, where torch's per-operation
     overhead and MKL's matrix-vector products (the 512 x 2048 layer: 100 us on one core of an
     AMD EPYC, OpenBLAS 55 us) make torch twice numpy's time (about 120 us a step in numpy;
-    6 MB of float32 weights read a step); a batch is as fast either way and keeps torch.
+    6 MB of float32 weights read a step); in a batch of 32 OpenBLAS is still 25% faster (the
+    network 1.6 ms a step against torch's 2.1; benchmarks/generate_speed.py).
     Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generate.py). A
     snapshot: later changes to the model's parameters are not seen.
     """
@@ -96,8 +97,9 @@ class _Network:
     """x (B, in) -> y (B, out), physical units, in the model's dtype; call in inference mode.
 
     At batch 1 the conversions cost as much as a small layer: numpy casts to the model's
-    dtype, and the caller holds one `torch.inference_mode` over the whole rollout. `rows` 1
-    with a one-member MANN on the CPU: `NumpyMANN` (half the time of torch at batch 1).
+    dtype, and the caller holds one `torch.inference_mode` over the whole rollout. A
+    one-member MANN on the CPU runs as `NumpyMANN` (half torch's time at batch 1, 3/4 at 32);
+    an ensemble, another module or a GPU keeps torch. `rows`: the batch size.
     """
 
     def __init__(
@@ -109,7 +111,7 @@ class _Network:
         self.device = None if parameter is None or parameter.device.type == "cpu" else parameter
         self.np_dtype = torch.empty(0, dtype=dtype).numpy().dtype
         self.numpy = None
-        if rows == 1 and self.device is None and isinstance(model, MANN) and model.ensemble == 1:
+        if self.device is None and isinstance(model, MANN) and model.ensemble == 1:
             self.numpy = NumpyMANN(model)
         self.x_mean, self.x_scale = stats.x_mean.astype(float), 1.0 / stats.x_std.astype(float)
         self.y_mean, self.y_std = stats.y_mean.astype(float), stats.y_std.astype(float)

@@ -162,12 +162,17 @@ def test_numpy_mann_equals_forward(params, dtype, tolerance):
     assert np.abs(expected).max() > 0.05  # outputs well above the tolerance
 
 
-def test_a_rollout_alone_runs_its_network_in_numpy(robot, params, trained):
+def test_a_cpu_model_runs_its_network_in_numpy(robot, params, trained):
     model, stats = trained
     generators = [
-        BatchGenerator(model, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
+        BatchGenerator(candidate, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
                        params.evaluate, StandingPose.nominal())
-        for rows in (1, 2)
+        for candidate, rows in ((model, 1), (model, 2), (_two_member(model), 2))
     ]  # fmt: skip
-    assert isinstance(generators[0].network.numpy, NumpyMANN)
-    assert generators[1].network.numpy is None  # a batch: torch
+    assert isinstance(generators[0].network.numpy, NumpyMANN)  # alone
+    assert isinstance(generators[1].network.numpy, NumpyMANN)  # a batch
+    assert generators[2].network.numpy is None  # an ensemble keeps torch
+
+
+def _two_member(model: MANN) -> MANN:
+    return MANN(model.input_dim, model.output_dim, model.params, ensemble=2, seeds=[0, 1])
