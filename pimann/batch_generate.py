@@ -99,12 +99,10 @@ class _Network:
     At batch 1 the conversions cost as much as a small layer: numpy casts to the model's
     dtype, and the caller holds one `torch.inference_mode` over the whole rollout. A
     one-member MANN on the CPU runs as `NumpyMANN` (half torch's time at batch 1, 3/4 at 32);
-    an ensemble, another module or a GPU keeps torch. `rows`: the batch size.
+    an ensemble, another module or a GPU keeps torch.
     """
 
-    def __init__(
-        self, model: torch.nn.Module, layout: FeatureLayout, stats: Normalisation, rows: int
-    ):
+    def __init__(self, model: torch.nn.Module, layout: FeatureLayout, stats: Normalisation):
         self.model = model.eval()
         parameter = next(model.parameters(), None)
         dtype = torch.float32 if parameter is None else parameter.dtype
@@ -159,7 +157,7 @@ class BatchGenerator:
         standing: StandingPose,
     ):
         rows = len(steering)
-        self.params, self.network = params, _Network(model, layout, stats, rows)
+        self.params, self.network = params, _Network(model, layout, stats)
         self.steering = np.asarray(steering, dtype=bool)
         self.standing_joints = standing.joints.copy()
         self.dt = 1.0 / float(layout.rate_hz)
