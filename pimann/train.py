@@ -91,6 +91,14 @@ def _dropout_seed(seed: int, epoch: int) -> int:
     return int(np.random.SeedSequence([seed, epoch, 0x5EED]).generate_state(1)[0])
 
 
+# per `train.pi_gradient`: the predictions L_B's gradient does not move
+_HELD = {
+    "both": (),
+    "joints": ("base_linear_velocity", "base_angular_velocity"),
+    "base": ("base_position", "base_rpy", "joints", "joint_velocities"),
+}
+
+
 class TrainingLoss(torch.nn.Module):
     """Per-member L_D (normalised MSE) and L_B (physical units) of an ensemble's prediction."""
 
@@ -101,10 +109,11 @@ class TrainingLoss(torch.nn.Module):
         pi_configuration: str,
         device: torch.device,
         pi_support: str = "lower_sole",
+        pi_gradient: str = "both",
     ):
         super().__init__()
         self.layout, self.pi_configuration = layout, pi_configuration
-        self.pi_support = pi_support
+        self.pi_support, self.pi_gradient = pi_support, pi_gradient
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
         self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
@@ -151,6 +160,8 @@ class TrainingLoss(torch.nn.Module):
             truth = self.pi_terms(target)
             for name in ("base_position", "base_rpy", "joints"):
                 terms[name] = truth[name]
+        for name in _HELD[self.pi_gradient]:
+            terms[name] = terms[name].detach()
         return mse, self.physics(**terms).mean(-1)
 
 
@@ -371,8 +382,9 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         model.parameters(), lr=config.learning_rate, weight_decay=weight_decay, fused=True
     )
     loss_fn = TrainingLoss(
-        data.layout, data.stats, config.pi_configuration, device, config.pi_support
-    )
+        data.layout, data.stats, config.pi_configuration, device, config.pi_support,
+        config.pi_gradient,
+    )  # fmt: skip
     fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)
     state = _State(
