@@ -54,8 +54,11 @@ class NumpyMANN:
     A rollout alone calls the network with one sample a step, where torch's per-operation
     overhead and MKL's matrix-vector products (the 512 x 2048 layer: 100 us on one core of an
     AMD EPYC, OpenBLAS 55 us) make torch twice numpy's time (about 120 us a step in numpy;
-    6 MB of float32 weights read a step); in a batch of 32 OpenBLAS is still 25% faster (the
-    network 1.6 ms a step against torch's 2.1; benchmarks/generate_speed.py).
+    6 MB of float32 weights read a step). A batch runs transposed, W^T (K out, in) @ h^T
+    (in, B): OpenBLAS's x @ W packs all of W at every call, about 400 us a layer for 2 to 8
+    rows (8x one row's matrix-vector product), which is what a batch's last rows (the
+    longest scripts) cost; transposed, 2 rows take 4x less and 32 rows 20% less
+    (benchmarks/generate_speed.py). One row keeps x @ W (a matrix-vector product).
     Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generate.py). A
     snapshot: later changes to the model's parameters are not seen.
     """
@@ -66,10 +69,16 @@ class NumpyMANN:
         member = {name: value[0].detach().cpu().numpy().copy()
                   for name, value in model.state_dict().items()}  # fmt: skip
         self.n_experts = model.n_experts
-        self.gate = [(member[f"gate_weight_{i}"].T.copy(), member[f"gate_bias_{i}"])
+        # (weight (in, out), its transpose (out, in), bias) per layer; the gate's are stored
+        # (out, in) as nn.Linear's, the experts' blocks (in, K out)
+        self.gate = [self._layer(member[f"gate_weight_{i}"].T, member[f"gate_bias_{i}"])
                      for i in range(model.n_gate_layers)]  # fmt: skip
-        self.experts = [(member[f"expert_weight_{i}"], member[f"expert_bias_{i}"])
+        self.experts = [self._layer(member[f"expert_weight_{i}"], member[f"expert_bias_{i}"])
                         for i in range(model.n_expert_layers)]  # fmt: skip
+
+    @staticmethod
+    def _layer(weight: np.ndarray, bias: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return np.ascontiguousarray(weight), np.ascontiguousarray(weight.T), bias
 
     @staticmethod
     def _elu(h: np.ndarray) -> np.ndarray:
@@ -77,17 +86,42 @@ class NumpyMANN:
 
     def __call__(self, x: np.ndarray) -> np.ndarray:
         """y (B, out) for x (B, in), in the model's dtype."""
+        if len(x) == 1:
+            return self._rows(x)
+        return np.ascontiguousarray(self._columns(np.ascontiguousarray(x.T)).T)
+
+    def _rows(self, x: np.ndarray) -> np.ndarray:
+        """The network on x (B, in), samples as rows."""
         h = x
-        for i, (weight, bias) in enumerate(self.gate):
+        for i, (weight, _, bias) in enumerate(self.gate):
             h = h @ weight + bias
             if i < len(self.gate) - 1:
                 h = self._elu(h)
         h = np.exp(h - h.max(axis=-1, keepdims=True))
         theta = (h / h.sum(axis=-1, keepdims=True))[:, None]  # (B, 1, K)
         h = x
-        for i, (weight, bias) in enumerate(self.experts):
+        for i, (weight, _, bias) in enumerate(self.experts):
             out = (h @ weight + bias).reshape(len(x), self.n_experts, -1)
             h = (theta @ out)[:, 0]  # sum_j theta_j (W_j h + b_j)
+            if i < len(self.experts) - 1:
+                h = self._elu(h)
+        return h
+
+    def _columns(self, x: np.ndarray) -> np.ndarray:
+        """The network on x (in, B), samples as columns; (out, B)."""
+        h = x
+        for i, (_, weight, bias) in enumerate(self.gate):
+            h = weight @ h + bias[:, None]
+            if i < len(self.gate) - 1:
+                h = self._elu(h)
+        h = np.exp(h - h.max(axis=0, keepdims=True))
+        theta = h / h.sum(axis=0, keepdims=True)  # (K, B)
+        h = x
+        for i, (_, weight, bias) in enumerate(self.experts):
+            out = (weight @ h + bias[:, None]).reshape(self.n_experts, -1, h.shape[1])
+            h = out[0] * theta[0]  # sum_j theta_j (W_j h + b_j)
+            for j in range(1, self.n_experts):
+                h += out[j] * theta[j]
             if i < len(self.experts) - 1:
                 h = self._elu(h)
         return h

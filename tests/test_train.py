@@ -283,3 +283,26 @@ def test_training_on_a_broken_dataset_names_it_and_writes_nothing(
         train_models(broken, tmp_path / "w1", 1.0, [0], params, "cpu", plots_dir=tmp_path / "p")
     assert raised.value.path == str(broken)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full.h5"]
+
+
+@pytest.mark.parametrize("side", ["both", "joints", "base"])
+def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
+    """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs unless `joints`,
+    the joint velocity outputs unless `base`; the loss's value is the same."""
+    from pimann.features import read_dataset
+
+    data = read_dataset(dataset_path)
+    cpu = torch.device("cpu")
+    loss = TrainingLoss(data.layout, data.stats, "predicted", cpu, "lower_sole", side)
+    both = TrainingLoss(data.layout, data.stats, "predicted", cpu, "lower_sole", "both")
+    model = MANN.from_seeds(130, 100, SMALL_MODEL, [0]).eval()
+    x = torch.as_tensor(data.x_train[None, :16])
+    prediction = model(x).detach().requires_grad_(True)
+    pi = loss(prediction, prediction.detach())[1]
+    assert torch.allclose(pi, both(prediction, prediction.detach())[1])
+    (grad,) = torch.autograd.grad(pi.sum(), prediction)
+    s, now = data.layout.y_slices, data.layout.current_output
+    base = grad[..., s["base_linear_future"]].unflatten(-1, (-1, 3))[..., now, :]
+    joints = grad[..., s["joint_velocities"]]
+    assert (base.abs().max() > 0) == (side != "joints")
+    assert (joints.abs().max() > 0) == (side != "base")
