@@ -18,11 +18,6 @@ from pimann.kinematics_torch import TorchKinematics
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, Robot
 
 
-# (m/s)^2: the relative L_B's denominator floor, a twist of about 0.1 m/s (a standing robot's
-# residual is not divided by nothing)
-RELATIVE_FLOOR = 0.01
-
-
 class PhysicsInformedLoss(nn.Module):
     """Per-sample L_B in physical units (m, rad, m/s, rad/s), inputs with any leading dims.
 
@@ -33,11 +28,6 @@ class PhysicsInformedLoss(nn.Module):
     With `support` (..., 2) flags of the feet in contact (the data's, not predicted), the
     residual is taken for each foot in contact and averaged over them: double support keeps
     both feet still, a frame with no foot down adds nothing.
-
-    `relative`: the squared residual divided by the squared sizes of its two sides,
-    |r|^2 / (|v_B|^2 + |(J^B)^-1 J^s sdot|^2 + RELATIVE_FLOOR): a scale-free disagreement of
-    the base twist with the legs', which shrinking every velocity does not lower (it does the
-    absolute one: see `train.pi_scale`).
     """
 
     def __init__(
@@ -45,10 +35,8 @@ class PhysicsInformedLoss(nn.Module):
         robot: Robot,
         dtype: torch.dtype | None = None,
         device: torch.device | str | None = None,
-        relative: bool = False,
     ):
         super().__init__()
-        self.relative = relative
         self.kinematics = TorchKinematics(
             robot, dtype=dtype or torch.get_default_dtype(), device=device,
             frames=(LEFT_SOLE, RIGHT_SOLE),
@@ -94,18 +82,9 @@ class PhysicsInformedLoss(nn.Module):
         feet, chain = self.foot_twists(joints, joint_velocities)
         twist = torch.cat((base_linear_velocity, base_angular_velocity), -1)
         if support is not None:
-            per_foot = self._residual(twist.unsqueeze(-2), feet)  # (..., 2)
+            per_foot = (twist.unsqueeze(-2) + feet).square().mean(-1)  # (..., 2)
             weight = support.to(per_foot.dtype)
             return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
         left = self.left_is_support(base_rpy, chain.frame_positions)
         foot = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
-        return self._residual(twist, foot)
-
-    def _residual(self, twist: torch.Tensor, foot: torch.Tensor) -> torch.Tensor:
-        """Mean squared residual of base twist + foot term over the 6 components, or its
-        relative form."""
-        squared = (twist + foot).square()
-        if not self.relative:
-            return squared.mean(-1)
-        size = twist.square().sum(-1) + foot.square().sum(-1) + RELATIVE_FLOOR
-        return squared.sum(-1) / size
+        return (twist + foot).square().mean(-1)

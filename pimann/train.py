@@ -110,16 +110,13 @@ class TrainingLoss(torch.nn.Module):
         device: torch.device,
         pi_support: str = "lower_sole",
         pi_gradient: str = "both",
-        pi_scale: str = "absolute",
     ):
         super().__init__()
         self.layout, self.pi_configuration = layout, pi_configuration
         self.pi_support, self.pi_gradient = pi_support, pi_gradient
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
-        self.physics = PhysicsInformedLoss(
-            load_robot("retarget"), torch.float32, device, relative=pi_scale == "relative"
-        )
+        self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
         self.to(device)
 
     def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
@@ -386,7 +383,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     )
     loss_fn = TrainingLoss(
         data.layout, data.stats, config.pi_configuration, device, config.pi_support,
-        config.pi_gradient, config.pi_scale,
+        config.pi_gradient,
     )  # fmt: skip
     fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)
