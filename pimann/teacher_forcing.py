@@ -22,6 +22,7 @@ import numpy as np
 import pandas as pd
 import torch
 
+from pimann.errors import PimannError
 from pimann.features import read_dataset
 from pimann.motion_classes import CLASSES, motion_classes
 from pimann.params import load_params
@@ -88,20 +89,36 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
     return pd.DataFrame(rows)
 
 
-def main(argv: list[str] | None = None) -> None:
+def model_folders(root: Path) -> list[Path]:
+    """The training outputs under `root`: itself when it is one (models/w10, its seeds'
+    folders inside), else its sub-folders that are (models/)."""
+    if any(root.glob("*/meta.json")):
+        return [root]
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and any(p.glob("*/meta.json")))
+    if not folders:
+        raise PimannError(root, "no trained models here (models/ or one of its folders)")
+    return folders
+
+
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models")
+    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models",
+                        help="models/ or one training output in it, e.g. models/w10")  # fmt: skip
     parser.add_argument("--samples", type=int, default=20000, help="training samples used")
     args = parser.parse_args(argv)
-    collection = REPO_ROOT / load_params().features.input
-    frames = [
-        class_response(folder, collection, args.samples)
-        for folder in sorted(p for p in args.models.iterdir() if p.is_dir())
-        if any(folder.glob("*/meta.json"))
-    ]
+    try:
+        if not args.models.is_dir():
+            raise PimannError(args.models, "not a folder")
+        collection = REPO_ROOT / load_params().features.input
+        frames = [class_response(folder, collection, args.samples)
+                  for folder in model_folders(args.models)]  # fmt: skip
+    except PimannError as error:
+        print(f"teacher_forcing: {error}", file=sys.stderr)
+        return 2
     table = pd.concat(frames, ignore_index=True)
     with pd.option_context("display.width", 160, "display.max_rows", 500):
         print(table.round(2).to_string(index=False))
+    return 0
 
 
 if __name__ == "__main__":

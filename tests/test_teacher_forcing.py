@@ -44,3 +44,16 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
     # the truth is the clips' own forward speed in the base frame (0.2 .. 0.7 m/s, pitched base)
     assert ((table["vx_true"] > 0.1) & (table["vx_true"] < 0.8)).all()
     assert table["samples"].min() >= 50 and np.isfinite(table["vx_slope"]).all()
+
+
+def test_models_folder_or_one_training_output_and_a_named_error(tmp_path, capsys):
+    from pimann.teacher_forcing import main, model_folders
+
+    (tmp_path / "w10" / "0").mkdir(parents=True)
+    (tmp_path / "w10" / "0" / "meta.json").write_text("{}")
+    (tmp_path / "notes").mkdir()
+    assert model_folders(tmp_path) == [tmp_path / "w10"]
+    assert model_folders(tmp_path / "w10") == [tmp_path / "w10"]
+    assert main(["--models", str(tmp_path / "notes")]) == 2
+    error = capsys.readouterr().err
+    assert "notes" in error and "no trained models" in error and error.count("\n") == 1
