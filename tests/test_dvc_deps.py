@@ -344,3 +344,22 @@ def test_shared_reads_follow_the_robot_variants():
     clips = set(shared_reads({ROOT / "pimann/mocap/clips.py"}, params))
     assert "data/mocap/bandai-namco/dataset" in clips
     assert not any(glob.has_magic(path) for path in clips)
+
+
+# train.* settings that do not change a trained model: the matrix itself, and where or in what
+# slices it runs (tests/test_train.py shows members train alike in any group and batch)
+TRAIN_NOT_RESULT = {"pi_weights", "eval_batch_size", "device", "workers"}
+
+
+@pytest.mark.parametrize("name", ["train", "train_baseline"])
+def test_trainings_list_every_train_setting_that_changes_a_model(name):
+    """A train.* key the training reads but DVC does not track would let an edit of it pass
+    unseen (the models of the other value kept): each one is a param of both trainings."""
+    import dataclasses
+
+    from pimann.params import TrainParams
+
+    listed = set(_dvc_stages()[name]["params"])
+    wanted = {f"train.{f.name}" for f in dataclasses.fields(TrainParams)}
+    wanted -= {f"train.{key}" for key in TRAIN_NOT_RESULT}
+    assert not wanted - listed, f"{name}: params not listed in dvc.yaml: {sorted(wanted - listed)}"
