@@ -55,10 +55,10 @@ class NumpyMANN:
     overhead and MKL's matrix-vector products (the 512 x 2048 layer: 100 us on one core of an
     AMD EPYC, OpenBLAS 55 us) make torch twice numpy's time (about 120 us a step in numpy;
     6 MB of float32 weights read a step). A batch runs transposed, W^T (K out, in) @ h^T
-    (in, B): OpenBLAS's x @ W packs all of W at every call, about 400 us a layer for 2 to 8
-    rows (8x one row's matrix-vector product), which is what a batch's last rows (the
-    longest scripts) cost; transposed, 2 rows take 4x less and 32 rows 20% less
-    (benchmarks/generate_speed.py). One row keeps x @ W (a matrix-vector product).
+    (in, B): OpenBLAS's x @ W packs all of W at every call, 450-600 us for the 512 x 2048
+    layer at 2 to 8 rows (8x one row's matrix-vector product), which is what a batch's last
+    rows (the longest scripts) cost; transposed, 2 rows take half that and 32 rows 20% less.
+    One row keeps x @ W (a matrix-vector product).
     Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generate.py). A
     snapshot: later changes to the model's parameters are not seen.
     """
