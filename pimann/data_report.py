@@ -82,6 +82,7 @@ from pimann.trajectory import Trajectory, iter_collection
 MIN_CLASS_FRAMES = 500  # per-class foot metrics only over at least 10 s at 50 Hz
 PAPER_FRAMES = 500  # the paper's test: 500 frames (10 s at 50 Hz)
 GLIDE_HEIGHT = 0.005  # m, a sole corner this close to the floor is down
+BELOW_FLOOR = 0.005  # m, a sole corner this far under the floor is in it (SPEC 3.1's target)
 GLIDE_TARGET = 0.1  # m/s, what the 95th percentile of a down corner's speed should not exceed
 GLIDE_PERCENTILE = 95.0
 
@@ -205,6 +206,9 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
             columns[f"{kind}_{rule}"] = np.nan if flags is None else _sliding(rms[kind], flags)
         columns[f"double_{rule}"] = np.nan if flags is None else flags.all(axis=1).astype(float)
     heights, speeds = _corner_speeds(feet.positions, feet.rotations, feet.velocities)
+    columns["lowest_corner"] = heights.min(axis=(1, 2))
+    flags = contacts.get("file_contacts")
+    columns["flight"] = np.nan if flags is None else (~flags.any(axis=1)).astype(float)
     speeds = np.where(heights <= GLIDE_HEIGHT, speeds, np.nan).reshape(n, -1)
     for k, column in enumerate(CORNER_COLUMNS):
         columns[column] = speeds[:, k]
@@ -263,6 +267,18 @@ def glides(frames: pd.DataFrame) -> dict[str, float | int | None]:
     }
 
 
+def floor(frames: pd.DataFrame) -> dict[str, float | None]:
+    """Where the soles meet the floor: the lowest sole corner (m), the share of frames with a
+    corner below it by more than `BELOW_FLOOR`, and of frames with no foot down by the file's
+    flags (a person's flight phase leaves the robot base nothing to stand on)."""
+    flight = frames["flight"].dropna()
+    return {
+        "lowest_corner_m": _number(frames["lowest_corner"].min()),
+        "below_floor_share": _number((frames["lowest_corner"] < -BELOW_FLOOR).mean()),
+        "flight_share": _number(flight.mean()) if len(flight) else None,
+    }
+
+
 def summarise(frames: pd.DataFrame) -> dict[str, Any]:
     """Composition of the original clips, and every foot metric over all clips (mirrors too)."""
     originals = frames[~frames["mirrored"]]
@@ -281,6 +297,7 @@ def summarise(frames: pd.DataFrame) -> dict[str, Any]:
         "sliding": {},
         "double_support": {},
         "glides": glides(frames),
+        "floor": floor(frames),
         "l_b": {},
     }
     summary["minutes"]["total"] = float(originals["seconds"].sum()) / 60.0
@@ -453,6 +470,21 @@ def report_table(report: dict[str, Any]) -> str:
         for rule in RULES:
             values = ((total[rule] or {}).get("per_class") or {}).get(name) or {}
             cells.append(_cell(values.get("double_support"), 3))
+        lines.append(f"| {name} | " + " | ".join(cells) + " |")
+    lines += [
+        "",
+        "The floor, over all clips with mirrors: the lowest sole corner, the share of frames "
+        f"with a corner more than {BELOW_FLOOR * 1000:g} mm under the floor, and of frames "
+        "with no foot down by the file's flags (flight: the retargeted base has no foot to "
+        "stand on).",
+        "",
+        "| source | lowest corner (m) | frames below the floor | flight frames |",
+        "|---|---|---|---|",
+    ]
+    for name, s in sources.items():
+        f = s["floor"]
+        cells = [_cell(f["lowest_corner_m"], 3), _cell(f["below_floor_share"], 4),
+                 _cell(f["flight_share"], 4)]  # fmt: skip
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -200,6 +200,25 @@ def test_double_support_fraction_of_walking_frames(params):
     assert double["evaluate_rule"] == pytest.approx(1.0)  # both feet stay on the floor
 
 
+def test_floor_reports_a_sole_in_the_floor_and_flight(params):
+    """The standing robot sunk 2 cm for 10 of 100 frames (its soles rest at 0 otherwise), and
+    no foot down by the file's flags for 5 of them."""
+    z = np.zeros(100)
+    z[40:50] = -0.02
+    contacts = np.ones((100, 2), bool)
+    contacts[60:65] = False
+    frames = dr.clip_frames("clip", make_trajectory(np.zeros((100, 2)), z=z, contacts=contacts),
+                            params)  # fmt: skip
+    floor = dr.floor(frames)
+    resting = frames["lowest_corner"].iloc[0]  # the standing pose's soles: within 0.1 mm of 0
+    assert abs(resting) < 1e-4
+    assert floor["lowest_corner_m"] == pytest.approx(resting - 0.02, abs=1e-9)
+    assert floor["below_floor_share"] == pytest.approx(0.1)
+    assert floor["flight_share"] == pytest.approx(0.05)
+    bare = dr.floor(dr.clip_frames("clip", make_trajectory(np.zeros((20, 2))), params))
+    assert bare["flight_share"] is None and bare["below_floor_share"] == 0.0
+
+
 # ----------------------------------------------------------------------------- the report
 
 
