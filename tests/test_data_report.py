@@ -219,6 +219,12 @@ def test_floor_reports_a_sole_in_the_floor_and_flight(params):
     assert bare["flight_share"] is None and bare["below_floor_share"] == 0.0
 
 
+def test_below_the_floor_is_the_retarget_quality_check_threshold():
+    from pimann.retarget.quality import FLOOR_TOLERANCE
+
+    assert dr.BELOW_FLOOR == -FLOOR_TOLERANCE
+
+
 # ----------------------------------------------------------------------------- the report
 
 
