@@ -11,6 +11,7 @@ from pimann.mocap.human_motion import HumanMotion
 from pimann.params import load_params
 from pimann.retarget.feet import (
     SWING_VERTICAL,
+    bridge_flights,
     debounce,
     human_contacts,
     hysteresis,
@@ -85,6 +86,24 @@ def test_human_contacts_find_each_step_with_double_support(params):
     assert 0.2 <= double <= 0.2 + late.sum() / n
     touchdowns = np.sum(~contacts[:-1] & contacts[1:], axis=0)
     np.testing.assert_array_equal(touchdowns, np.sum(~truth[:-1] & truth[1:], axis=0))
+
+
+def test_a_flight_is_bridged_by_the_foot_that_left_last():
+    # columns left, right: the right foot leaves at frame 3 (left gone since 2), lands at 6;
+    # a clip opening in flight keeps the foot that lands first; no foot ever down stays so
+    contacts = np.array(
+        [[1, 1], [1, 1], [0, 1], [0, 0], [0, 0], [0, 1], [1, 1], [1, 0], [0, 0], [0, 1]], bool
+    )
+    bridged = bridge_flights(contacts)
+    expected = contacts.copy()
+    expected[3:5, 1] = True  # right was down last before the first flight
+    expected[8, 0] = True  # left was down last before the second
+    np.testing.assert_array_equal(bridged, expected)
+    assert bridged.any(axis=1).all()
+    opening = np.array([[0, 0], [0, 0], [1, 0], [1, 1]], bool)
+    np.testing.assert_array_equal(bridge_flights(opening)[:2], [[1, 0], [1, 0]])
+    never = np.zeros((4, 2), bool)
+    np.testing.assert_array_equal(bridge_flights(never), never)
 
 
 def test_the_plan_pins_stance_and_lifts_before_moving(params):
