@@ -130,11 +130,14 @@ def generate_batch(
     *,
     contact_params: EvaluateParams | None = None,
     standing: StandingPose | None = None,
+    start_joint_velocities: np.ndarray | None = None,
     timings: dict[str, float] | None = None,
 ) -> list[Rollout]:
     """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
     `standing`: the pose to start from and return to (default: the robot's nominal one);
+    `start_joint_velocities` (nj,): the joints' velocities at the start (default: at rest;
+    pimann.mid_stride starts rollouts inside a clip's gait);
     `timings`: seconds per section of the step (`SECTIONS`, "record") are added to it.
     """
     if not specs:
@@ -145,6 +148,8 @@ def generate_batch(
         robot or load_robot(), contact_params or load_params().evaluate,
         standing or StandingPose.nominal(),
     )  # fmt: skip
+    if start_joint_velocities is not None:
+        generator.joint_velocities[:] = start_joint_velocities
     names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
              "foot")  # fmt: skip
     n = len(plan.active)

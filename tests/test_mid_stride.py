@@ -1,0 +1,74 @@
+"""Gait sustainment from a clip's mid-stride state (pimann.mid_stride) on a tiny real model."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from pimann.features import build_dataset, write_dataset
+from pimann.generate import RolloutSpec, generate_batch
+from pimann.mann import MANN
+from pimann.mid_stride import achieved, clip_start, sustainment
+from pimann.params import ModelParams, MotionSegment, load_params
+from pimann.standing import StandingPose
+from pimann.train import load_model, save_model
+from pimann.trajectory import write_collection
+from tests.test_features import RATE, synthetic_clip, synthetic_collection
+
+
+def test_clip_start_takes_the_middle_frame_and_its_motion():
+    clip = synthetic_clip(200, velocity=(0.5, 0.0, 0.0), yaw_rate=0.0)
+    name, command, pose, velocities = clip_start(clip, 10.0)
+    assert name == "forward"
+    assert command.vx == pytest.approx(0.5, abs=1e-6) and abs(command.vy) < 1e-6
+    assert command.duration == 10.0 and abs(command.yaw_rate) < 1e-9
+    np.testing.assert_array_equal(pose.joints, clip.joint_positions[100])
+    # central difference of the sinusoidal joints at frame 100
+    expected = (clip.joint_positions[101] - clip.joint_positions[99]) * RATE / 2
+    np.testing.assert_allclose(velocities, expected)
+
+
+def test_achieved_speed_ratio_and_touchdowns_closed_form():
+    # a base at 0.3 m/s along y under a 0.6 m/s lateral command; the left foot lands 4 times
+    clip = synthetic_clip(500, velocity=(0.0, 0.3, 0.0), yaw_rate=0.0)
+    contacts = np.ones((500, 2), bool)
+    for k in range(4):
+        contacts[100 * k + 50 : 100 * k + 60, 0] = False
+    clip = dataclasses.replace(clip, contacts=contacts)
+    ratio, touchdowns = achieved(clip, MotionSegment(10.0, 0.0, 0.6, 0.0))
+    assert ratio == pytest.approx(0.5, abs=1e-6)
+    assert touchdowns == pytest.approx(2.0 * 10.0 / clip.time[-1])  # (4 + 0) / 2 feet
+
+
+def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(tmp_path):
+    params = load_params()
+    clips = synthetic_collection(n_sources=6, frames=200)
+    collection = tmp_path / "walking.h5"
+    write_collection(collection, clips)
+    dataset = build_dataset(clips, params.features, "full")
+    write_dataset(tmp_path / "full.h5", dataset)
+    small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
+    torch.manual_seed(0)
+    model = MANN(dataset.layout.input_dim, dataset.layout.output_dim, small, seeds=[0])
+    meta = {"pi_weight": 0.0, "seed": 0, "variant": "full", "dataset": str(tmp_path / "full.h5"),
+            "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
+    save_model(tmp_path / "w0" / "0", model, dataset.layout, dataset.stats, meta)
+
+    model, layout, stats, _ = load_model(tmp_path / "w0" / "0")
+    pose = StandingPose(clips[0][1].joint_positions[80].copy(), np.zeros(2), "mid-stride")
+    velocities = np.linspace(-1.0, 1.0, len(pose.joints))
+    (rollout,) = generate_batch(
+        model, layout, stats, [RolloutSpec([MotionSegment(1.0, 0.5, 0.0, 0.0)], False)],
+        params.rollout, contact_params=params.evaluate, standing=pose,
+        start_joint_velocities=velocities,
+    )  # fmt: skip
+    np.testing.assert_array_equal(rollout.trajectory.joint_positions[0], pose.joints)
+    np.testing.assert_array_equal(rollout.trajectory.joint_velocities[0], velocities)
+
+    table = sustainment(tmp_path / "w0", collection, params, seconds=3.0)
+    assert len(table) >= 1 and set(table["class"]) <= {"forward", "turning", "diagonal"}
+    assert np.isfinite(table[["ratio_mid", "ratio_stand"]].to_numpy()).all()
+    assert (table["speed"] > 0.1).all()
