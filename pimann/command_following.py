@@ -60,12 +60,10 @@ from pimann.contacts import frame_period
 from pimann.errors import PimannError
 from pimann.metrics import trajectory_time_series
 from pimann.motion_classes import CLASSES, WINDOW_S, base_motion, classify
-from pimann.params import EvaluateParams, MotionSegment, StandSegment
+from pimann.params import EvaluateParams, MotionSegment, Segment, StandSegment
 from pimann.robot import Robot
 from pimann.rotations import yaw_of
 from pimann.trajectory import Trajectory
-
-Segment = MotionSegment | StandSegment
 
 # ----------------------------------------------------------------------------- thresholds
 # cutting a clip into commands

@@ -13,9 +13,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from pimann.errors import PimannError
-from pimann.params import MotionSegment, StandSegment
-
-Segment = MotionSegment | StandSegment
+from pimann.params import Segment, StandSegment
 
 
 @dataclasses.dataclass(frozen=True)

@@ -83,10 +83,9 @@ from pimann.features import FeatureLayout, Normalisation
 from pimann.params import (
     DEFAULT_PARAMS,
     EvaluateParams,
-    MotionSegment,
     Params,
     RolloutParams,
-    StandSegment,
+    Segment,
     load_params,
 )
 from pimann.paths import repo_relative
@@ -96,7 +95,6 @@ from pimann.trajectory import Trajectory, write_trajectory
 
 log = logging.getLogger(__name__)
 
-Segment = MotionSegment | StandSegment
 BATCH_SIZE = 64  # rollouts generated together by `generate_files` (more: chunks)
 
 

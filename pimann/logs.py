@@ -24,18 +24,21 @@ def quiet_third_party(level: int = logging.WARNING) -> None:
         logging.getLogger(name).setLevel(level)
 
 
-def add_verbose(parser: argparse.ArgumentParser) -> None:
-    """A stage's -v: its per-epoch and per-item lines (DEBUG) too."""
+def parse_stage_args(
+    parser: argparse.ArgumentParser, argv: list[str] | None, stage_log: logging.Logger
+) -> argparse.Namespace:
+    """A stage's arguments, with its -v (per-epoch and per-item lines, DEBUG) added, and its
+    log set up: third-party loggers quiet; under -v, DEBUG for pimann's loggers and the
+    stage's own, not the libraries'."""
     parser.add_argument(
         "-v", "--verbose", action="store_true", help="log per-epoch and per-item detail too"
     )
-
-
-def set_verbose(verbose: bool, stage_log: logging.Logger) -> None:
-    """DEBUG for pimann's loggers and the stage's own when `verbose`; not the libraries'."""
-    if verbose:
+    args = parser.parse_args(argv)
+    quiet_third_party()
+    if args.verbose:
         for logger in (logging.getLogger(OURS), stage_log):
             logger.setLevel(logging.DEBUG)
+    return args
 
 
 def logging_levels() -> tuple[int, int]:

@@ -165,6 +165,9 @@ class StandSegment:
     stand: Literal[True]
 
 
+Segment = MotionSegment | StandSegment  # one command of a script
+
+
 @dataclasses.dataclass(frozen=True)
 class RolloutParams:
     """rollout: autoregressive generation and steering (issue 4)."""
@@ -181,7 +184,7 @@ class RolloutParams:
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     start_pose: Literal["data", "robot"]  # standing pose of a start and a stop (standing.py)
-    scenarios: dict[str, list[MotionSegment | StandSegment]]
+    scenarios: dict[str, list[Segment]]
     scenario_names: list[str]  # the scenarios the DVC rollout stage generates
     # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)
     benchmark_clips: bool

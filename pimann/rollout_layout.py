@@ -27,7 +27,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pimann.errors import PimannError
-from pimann.params import MotionSegment, Params, StandSegment
+from pimann.params import MotionSegment, Params, Segment, StandSegment
 
 if TYPE_CHECKING:
     import pandas as pd
@@ -39,8 +39,6 @@ MODELS_FILE = "models.json"
 STEERING_LABEL = {True: "steering", False: "nosteering"}
 CLIP_PREFIX = "clip_"  # the benchmark scripts' scenario names: clip_<clip name>
 SCRIPT_ATTR = "script"  # a rollout's attrs: the script it ran, as JSON
-
-Segment = MotionSegment | StandSegment
 
 
 @dataclasses.dataclass(frozen=True, order=True)

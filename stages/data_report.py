@@ -11,7 +11,7 @@ import time
 from pathlib import Path
 
 from pimann.data_report import data_report, write_report
-from pimann.logs import add_verbose, quiet_third_party, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -22,14 +22,11 @@ log = logging.getLogger("data_report")
 
 @stage_entry(reads=("robot",))
 def main(argv: list[str] | None = None) -> None:
-    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--collection", type=Path, default=None, help="default: features.input")
     parser.add_argument("--out", type=Path, default=Path("results/data_report"))
     parser.add_argument("--workers", type=int, default=2)
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     params = load_params()
     collection = REPO_ROOT / (args.collection or Path(params.features.input))
     started = time.perf_counter()

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 
 from pimann.evaluate import evaluate_all
-from pimann.logs import add_verbose, quiet_third_party, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -23,15 +23,12 @@ log = logging.getLogger("evaluate")
 
 @stage_entry(reads=("robot",))
 def main(argv: list[str] | None = None) -> None:
-    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--workers", type=int, default=2)
     parser.add_argument("--data", type=Path, help="retargeted collection (default: features.input)")
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     params = load_params()
     started = time.perf_counter()
     claims = evaluate_all(

@@ -10,7 +10,7 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.logs import add_verbose, quiet_third_party, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.report import write_report
@@ -21,13 +21,10 @@ log = logging.getLogger("report")
 
 @stage_entry
 def main(argv: list[str] | None = None) -> None:
-    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--results", type=Path, default=Path("results"))
     parser.add_argument("--figures", type=Path, default=Path("paper_figures"))
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     started = time.perf_counter()
     metrics, report = write_report(
         REPO_ROOT / args.results, REPO_ROOT / args.figures, load_params()

@@ -16,7 +16,7 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.logs import add_verbose, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.parallel import cpu_workers
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -32,9 +32,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--models", type=Path, required=True, help="a training output folder")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--workers", type=int, default=2)
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     params = load_params()
     started = time.perf_counter()
     written = run_rollouts(

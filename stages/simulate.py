@@ -17,7 +17,7 @@ import time
 from pathlib import Path
 
 import pimann.sim  # noqa: F401 -- picks MuJoCo's headless GL backend before mujoco loads
-from pimann.logs import add_verbose, quiet_third_party, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.sim.runs import simulate_runs
@@ -28,14 +28,11 @@ log = logging.getLogger("simulate")
 
 @stage_entry(reads=("robot", "simulation"))
 def main(argv: list[str] | None = None) -> None:
-    quiet_third_party()
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rollouts", type=Path, default=Path("results/rollouts"))
     parser.add_argument("--out", type=Path, default=Path("results/sim"))
     parser.add_argument("--summary", type=Path, default=Path("results/sim_summary.json"))
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     params = load_params()
     started = time.perf_counter()
     record = simulate_runs(

@@ -18,7 +18,7 @@ import time
 from pathlib import Path
 
 from pimann.features import VARIANTS
-from pimann.logs import add_verbose, set_verbose
+from pimann.logs import parse_stage_args
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry
@@ -34,9 +34,7 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--variant", choices=VARIANTS, default="full")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--plots", type=Path, required=True)
-    add_verbose(parser)
-    args = parser.parse_args(argv)
-    set_verbose(args.verbose, log)
+    args = parse_stage_args(parser, argv, log)
     params = load_params()
     dataset = REPO_ROOT / params.features.output_dir / f"{args.variant}.h5"
     device = pick_device(params.train.device)
