@@ -50,12 +50,10 @@ contacts and steering; each row its own script, stops and restarts). `generate_r
 batch of one, so a rollout alone equals its row of any batch (to rounding: on the CPU a MANN
 runs in numpy (`batch_generate.NumpyMANN`), and BLAS rounds a row differently at other batch
 sizes; 1e-16 in float64). The rollout stage (pimann.rollouts.run_rollouts)
-generates one batch per seed (`generate_files`). Measured (benchmarks/generate_speed.py:
-full-size MANN, 1 thread, 2 cores shared with other processes, load 1-3): a 10-s rollout
-alone 0.14-0.15 s (0.15-0.16 s steered; the network ~47% of it), against 0.25-0.27 s
-(0.26-0.28 s) with the torch network at batch 1 side by side; on an idle CPU 0.034 s
-amortised over a batch of 32 (0.045 s with torch's network in the batch), and the quick run's
-full set batched 4.2x faster than one rollout at a time (3.4x with torch in the batch).
+generates one batch per seed (`generate_files`). `python -m benchmarks.generate_speed`
+measures it (full-size MANN, 1 thread): a 10-s rollout alone 0.15-0.16 s, 0.03-0.05 s
+amortised over a batch of 32, and the quick run's full set batched 4.1x faster than one
+rollout at a time (fastest of three alternating passes; single passes 3.2-4.1x).
 """
 
 from __future__ import annotations
