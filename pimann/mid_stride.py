@@ -26,13 +26,12 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from pimann.benchmark_clips import held_out_clips
-from pimann.errors import PimannError
 from pimann.motion_classes import CLASSES, base_motion, classify
 from pimann.params import MotionSegment, Params, load_params
 from pimann.paths import REPO_ROOT
 from pimann.rollout_layout import model_seeds
 from pimann.standing import StandingPose
-from pimann.teacher_forcing import model_folders
+from pimann.teacher_forcing import add_models_argument, table_over_models
 from pimann.trajectory import Trajectory
 
 SETTLE_S = 2.0  # s left out at the start of each rollout before its speed is measured
@@ -95,21 +94,19 @@ def sustainment(models_dir: Path, collection: Path, params: Params, seconds: flo
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models",
-                        help="models/ or one training output in it, e.g. models/w10")  # fmt: skip
+    add_models_argument(parser)
     parser.add_argument("--seconds", type=float, default=10.0, help="rollout length")
     args = parser.parse_args(argv)
-    try:
-        if not args.models.is_dir():
-            raise PimannError(args.models, "not a folder")
+
+    def starts(folders: list[Path]) -> pd.DataFrame:
         params = load_params()
         collection = REPO_ROOT / params.features.input
-        frames = [sustainment(folder, collection, params, args.seconds)
-                  for folder in model_folders(args.models)]  # fmt: skip
-    except PimannError as error:
-        print(f"mid_stride: {error}", file=sys.stderr)
+        frames = [sustainment(folder, collection, params, args.seconds) for folder in folders]
+        return pd.concat(frames, ignore_index=True)
+
+    table = table_over_models("mid_stride", args.models, starts)
+    if table is None:
         return 2
-    table = pd.concat(frames, ignore_index=True)
     summary = table.groupby(["model", "class"]).agg(
         clips=("clip", "nunique"), speed=("speed", "median"),
         ratio_mid=("ratio_mid", "median"), ratio_stand=("ratio_stand", "median"),

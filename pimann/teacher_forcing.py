@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -100,22 +101,39 @@ def model_folders(root: Path) -> list[Path]:
     return folders
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_models_argument(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--models", type=Path, default=REPO_ROOT / "models",
                         help="models/ or one training output in it, e.g. models/w10")  # fmt: skip
+
+
+def table_over_models(
+    tool: str, models: Path, table_of: Callable[[list[Path]], pd.DataFrame]
+) -> pd.DataFrame | None:
+    """`table_of` the training outputs under `models` (`model_folders`); None after the one
+    line on stderr that names the bad input."""
+    try:
+        if not models.is_dir():
+            raise PimannError(models, "not a folder")
+        return table_of(model_folders(models))
+    except PimannError as error:
+        print(f"{tool}: {error}", file=sys.stderr)
+        return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_models_argument(parser)
     parser.add_argument("--samples", type=int, default=20000, help="training samples used")
     args = parser.parse_args(argv)
-    try:
-        if not args.models.is_dir():
-            raise PimannError(args.models, "not a folder")
+
+    def responses(folders: list[Path]) -> pd.DataFrame:
         collection = REPO_ROOT / load_params().features.input
-        frames = [class_response(folder, collection, args.samples)
-                  for folder in model_folders(args.models)]  # fmt: skip
-    except PimannError as error:
-        print(f"teacher_forcing: {error}", file=sys.stderr)
+        frames = [class_response(folder, collection, args.samples) for folder in folders]
+        return pd.concat(frames, ignore_index=True)
+
+    table = table_over_models("teacher_forcing", args.models, responses)
+    if table is None:
         return 2
-    table = pd.concat(frames, ignore_index=True)
     with pd.option_context("display.width", 160, "display.max_rows", 500):
         print(table.round(2).to_string(index=False))
     return 0

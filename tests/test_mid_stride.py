@@ -72,3 +72,12 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
     assert len(table) >= 1 and set(table["class"]) <= {"forward", "turning", "diagonal"}
     assert np.isfinite(table[["ratio_mid", "ratio_stand"]].to_numpy()).all()
     assert (table["speed"] > 0.1).all()
+
+
+def test_a_folder_without_models_gets_one_line(tmp_path, capsys):
+    from pimann.mid_stride import main
+
+    assert main(["--models", str(tmp_path / "missing")]) == 2
+    error = capsys.readouterr().err
+    assert error.startswith("mid_stride: ") and "missing" in error and "not a folder" in error
+    assert error.count("\n") == 1
