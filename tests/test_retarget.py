@@ -129,3 +129,21 @@ def test_retarget_file_and_its_mirror(params):
     np.testing.assert_array_equal(mirrored.contacts, original.contacts[:, ::-1])
     # 195 frames at 30 fps = 6.47 s, at 50 Hz
     assert len(original) == 324
+
+
+def test_a_flight_phase_keeps_a_foot_down_and_every_sole_above_the_floor(robot, params):
+    # the motion-matching take jogs through a 0.15 s flight (no foot down) at 72.6 s: the
+    # robot walks it with the foot that left last still planted (it once sank 28 cm and
+    # put a sole 14 cm under the floor)
+    from pimann.contacts import foot_kinematics, lowest_corner_heights, trajectory_configurations
+    from pimann.mocap.clips import slice_motion
+
+    path = mocap_dir() / "motionmatching-locomotion/locomotion.bvh"
+    motion = read_take(take_of(path, params.data))
+    time = motion.time - motion.time[0]
+    start, stop = np.searchsorted(time, [71.0, 74.5])
+    trajectory = retarget_motion(slice_motion(motion, int(start), int(stop)), params.retarget)
+    assert trajectory.contacts.any(axis=1).all()
+    feet = foot_kinematics(robot, trajectory_configurations(robot, trajectory))
+    assert lowest_corner_heights(feet.positions, feet.rotations).min() > -0.01
+    assert trajectory.base_position[:, 2].min() > 0.5
