@@ -18,6 +18,7 @@ command, after the first 2 s) to it, and the touchdowns per foot.
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -26,11 +27,13 @@ import pandas as pd
 from scipy.spatial.transform import Rotation
 
 from pimann.benchmark_clips import held_out_clips
+from pimann.command_following import touchdowns
 from pimann.motion_classes import CLASSES, base_motion, classify
 from pimann.params import MotionSegment, Params, load_params
 from pimann.paths import REPO_ROOT
 from pimann.rollout_layout import model_seeds
 from pimann.standing import StandingPose
+from pimann.steering import roll_pitch
 from pimann.teacher_forcing import add_models_argument, table_over_models
 from pimann.trajectory import Trajectory
 
@@ -45,8 +48,9 @@ def clip_start(trajectory: Trajectory, seconds: float):
     name = CLASSES[classify(velocity[mid : mid + 1], yaw_rate[mid : mid + 1])[0]]
     command = MotionSegment(seconds, float(velocity[mid, 0]), float(velocity[mid, 1]),
                             float(yaw_rate[mid]))  # fmt: skip
-    rpy = Rotation.from_quat(trajectory.base_quaternion_xyzw[mid]).as_euler("xyz")
-    pose = StandingPose(trajectory.joint_positions[mid].copy(), rpy[:2].copy(), "mid-stride")
+    rotation = Rotation.from_quat(trajectory.base_quaternion_xyzw[mid : mid + 1]).as_matrix()
+    pose = StandingPose(trajectory.joint_positions[mid].copy(), roll_pitch(rotation)[0],
+                        "mid-stride")  # fmt: skip
     joint_velocities = np.gradient(trajectory.joint_positions, trajectory.time, axis=0)[mid]
     return name, command, pose, joint_velocities
 
@@ -59,9 +63,8 @@ def achieved(trajectory: Trajectory, command: MotionSegment) -> tuple[float, flo
     wanted = np.array([command.vx, command.vy])
     speed = float(np.linalg.norm(wanted))
     along = velocity[settled] @ (wanted / speed) if speed > 0 else np.zeros(settled.sum())
-    contacts = np.asarray(trajectory.contacts, dtype=int)
-    touchdowns = np.sum(np.diff(contacts, axis=0) > 0, axis=0).mean()
-    return float(along.mean()) / speed, float(touchdowns * 10.0 / trajectory.time[-1])
+    per_foot = touchdowns(trajectory.contacts).mean()
+    return float(along.mean()) / speed, float(per_foot * 10.0 / trajectory.time[-1])
 
 
 def sustainment(models_dir: Path, collection: Path, params: Params, seconds: float) -> pd.DataFrame:
@@ -75,19 +78,21 @@ def sustainment(models_dir: Path, collection: Path, params: Params, seconds: flo
     rows = []
     for seed, folder in model_seeds(models_dir).items():
         model, layout, stats, meta = load_model(folder)
+        roll = functools.partial(generate_batch, model, layout, stats, params=params.rollout,
+                                 contact_params=params.evaluate)  # fmt: skip
+        # from standing: every clip's command in one batch; from mid-stride: one start each
         standing = StandingPose.from_json(meta.get("standing"))
-        for clip, motion_class, command, pose, joint_velocities in starts:
+        from_stand = roll([RolloutSpec([start[2]], False) for start in starts], standing=standing)
+        for (clip, motion_class, command, pose, velocities), stand in zip(
+            starts, from_stand, strict=True
+        ):
+            (mid,) = roll([RolloutSpec([command], False)], standing=pose,
+                          start_joint_velocities=velocities)  # fmt: skip
             row = {"model": models_dir.name, "seed": seed, "clip": clip, "class": motion_class,
                    "speed": float(np.hypot(command.vx, command.vy))}  # fmt: skip
-            for start, begin, velocities in (("mid", pose, joint_velocities),
-                                             ("stand", standing, None)):  # fmt: skip
-                (rollout,) = generate_batch(
-                    model, layout, stats, [RolloutSpec([command], False)], params.rollout,
-                    contact_params=params.evaluate, standing=begin,
-                    start_joint_velocities=velocities,
-                )  # fmt: skip
-                ratio, touchdowns = achieved(rollout.trajectory, command)
-                row[f"ratio_{start}"], row[f"touchdowns_{start}"] = ratio, touchdowns
+            for start, rollout in (("mid", mid), ("stand", stand)):
+                ratio, count = achieved(rollout.trajectory, command)
+                row[f"ratio_{start}"], row[f"touchdowns_{start}"] = ratio, count
             rows.append(row)
     return pd.DataFrame(rows)
 
