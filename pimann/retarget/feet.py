@@ -104,7 +104,7 @@ def human_contacts(motion: HumanMotion, params: RetargetParams) -> np.ndarray:
 def bridge_flights(contacts: np.ndarray) -> np.ndarray:
     """(T, 2) contacts with no flight: where the person has no foot down (a jog's flight
     phase), the foot that left the floor last stays down until the other one lands. The
-    robot walks; without a foot to stand on, its IK let the base sink 28 cm and a sole dip
+    robot walks; without a foot to stand on, its IK let the base sink 30 cm and a sole dip
     14 cm under the floor in the motion-matching take's 0.15 s flight at 72.6 s."""
     contacts = contacts.copy()
     for start, stop in true_runs(~contacts.any(axis=1)):
