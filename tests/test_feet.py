@@ -157,3 +157,56 @@ def test_planted_soles_hold_and_the_base_gives_way(robot, params):
         assert np.linalg.norm(pin.log3(placement.rotation.T @ target.rotation)) < 1e-2
     moved = robot.frame_placement(q, "data_Pelvis").translation - pelvis.translation
     assert 0.005 < moved[0] < 0.06
+
+
+def _corner_heights(robot, q) -> np.ndarray:
+    from pimann.robot import SOLE_CORNERS
+
+    heights = []
+    for frame in ("l_sole", "r_sole"):
+        placement = robot.frame_placement(q, frame)
+        heights.append((SOLE_CORNERS @ placement.rotation.T + placement.translation)[:, 2])
+    return np.concatenate(heights)
+
+
+def test_floor_limit_rows_are_the_corner_heights_derivative(robot, rng):
+    """The linearised floor rows against finite differences of the corners' heights."""
+    import pink
+    import pinocchio as pin
+
+    from pimann.retarget.ik import FloorLimit
+
+    q = robot.standing_configuration()
+    q[3:7] = pin.Quaternion(pin.rpy.rpyToMatrix(0.1, -0.2, 0.4)).coeffs()
+    q[7:] += rng.uniform(-0.2, 0.2, size=len(q) - 7)
+    configuration = pink.Configuration(robot.model, robot.model.createData(), q)
+    rows, heights = FloorLimit(robot).compute_qp_inequalities(configuration, 0.02)
+    np.testing.assert_allclose(heights, _corner_heights(robot, q), atol=1e-12)
+    step = 1e-6 * rng.standard_normal(robot.model.nv)
+    moved = pin.integrate(robot.model, q, step)
+    change = _corner_heights(robot, moved) - _corner_heights(robot, q)
+    np.testing.assert_allclose(-rows @ step, change, atol=1e-11)
+
+
+def test_a_sole_target_under_the_floor_stops_at_it(robot, params):
+    """Both soles asked 3 cm under the floor, a light swing cost: the corners stop at z = 0
+    (the floor limit), and go under it without the limit."""
+    import pinocchio as pin
+
+    q0 = robot.standing_configuration()
+    q0[2] -= min(robot.frame_placement(q0, f).translation[2] for f in ("l_sole", "r_sole"))
+    soles = tuple(robot.frame_placement(q0, f) for f in ("l_sole", "r_sole"))
+    sunk = tuple(pin.SE3(s.rotation, s.translation - [0.0, 0.0, 0.03]) for s in soles)
+    pelvis = robot.frame_placement(q0, "data_Pelvis")
+    targets = np.array([robot.frame_placement(q0, f"data_{s}").rotation for s in SEGMENTS[1:]])
+    ik = RetargetIK(robot, params, RATE)
+    ik.reset(q0)
+    for _ in range(20):
+        q = ik.solve(pelvis, targets, sunk, (params.stance_weight,) * 2)
+    assert _corner_heights(robot, q).min() > -1e-6
+    assert _corner_heights(robot, q).min() < 1e-3  # pressed onto the floor
+    ik.limits_with_soles = ik.limits  # without the floor
+    ik.reset(q0)
+    for _ in range(20):
+        q = ik.solve(pelvis, targets, sunk, (params.stance_weight,) * 2)
+    assert _corner_heights(robot, q).min() < -0.02

@@ -1,7 +1,8 @@
 """Whole-body differential IK with pink: the robot follows the human segment orientations.
 
 The feet follow the sole targets of feet.py (full poses): a planted sole weighs
-`stance_weight` and stays where it was put down, a swinging one `swing_weight`. The pelvis
+`stance_weight` and stays where it was put down, a swinging one `swing_weight`; no sole corner
+goes under the floor. The pelvis
 follows the person's pelvis orientation and the scaled pelvis position at lower weights, so
 the base goes wherever the planted feet let it (the robot's legs are shorter than the
 person's). The 10 other segments are orientation-only costs on the robot's `data_<Segment>`
@@ -26,7 +27,7 @@ from pink.limits import ConfigurationLimit, Limit
 from pink.tasks import FrameTask, PostureTask
 
 from pimann.params import RetargetParams
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot
+from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot
 
 FEET = ("LeftFoot", "RightFoot")
 SHOULDER_ROLLS = ("l_shoulder_roll", "r_shoulder_roll")
@@ -54,6 +55,28 @@ class FootSpacingLimit(Limit):
         row = lateral @ jacobian
         row[:6] = 0.0  # a distance in the base frame does not change when the base moves
         return -row[None], np.array([distance - self.minimum])
+
+
+class FloorLimit(Limit):
+    """Every sole corner stays at or above the floor (z >= 0), linearised. The sole targets
+    are costs traded against the legs' segment targets, and costs alone let soles through
+    the floor (SPEC 3.1; the whole data set had a sole corner 12.8 cm under it)."""
+
+    def __init__(self, robot: Robot):
+        self.model = robot.model
+        self.frames = (robot.frame_id(LEFT_SOLE), robot.frame_id(RIGHT_SOLE))
+
+    def compute_qp_inequalities(self, configuration, dt):
+        data = configuration.data
+        rows, heights = [], []
+        for frame in self.frames:
+            placement = data.oMf[frame]
+            jacobian = pin.getFrameJacobian(self.model, data, frame, pin.LOCAL_WORLD_ALIGNED)
+            for offset in SOLE_CORNERS @ placement.rotation.T:  # corners from the sole origin
+                # z of v + omega x r: v_z + omega_x r_y - omega_y r_x
+                rows.append(jacobian[2] + offset[1] * jacobian[3] - offset[0] * jacobian[4])
+                heights.append(placement.translation[2] + offset[2])
+        return -np.array(rows), np.array(heights)
 
 
 class RetargetIK:
@@ -100,6 +123,8 @@ class RetargetIK:
             ConfigurationLimit(model),
             FootSpacingLimit(robot, params.min_foot_spacing),
         ]
+        # with planned soles (the second pass) no sole corner goes under the floor
+        self.limits_with_soles = [*self.limits, FloorLimit(robot)]
         self.configuration: pink.Configuration | None = None
 
     def reset(self, q: np.ndarray) -> None:
@@ -139,13 +164,14 @@ class RetargetIK:
             limbs = [t for t in self.segment_tasks if t not in self.foot_tasks]
             tasks = [self.pelvis_task, *limbs, *self.sole_tasks, self.posture_task]
             constraints = []
+        limits = self.limits if soles is None else self.limits_with_soles
         for _ in range(self.params.iterations_per_frame):
             velocity = pink.solve_ik(
                 configuration,
                 tasks,
                 self.dt,
                 solver=self.params.solver,
-                limits=self.limits,
+                limits=limits,
                 constraints=constraints,
                 safety_break=False,
             )
