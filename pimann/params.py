@@ -88,6 +88,8 @@ class RetargetParams:
     release_travel: float  # m ... or farther than this from where it came down
     min_contact_s: float  # s, shorter contacts are dropped
     min_swing_s: float  # s, shorter lifts are filled
+    release_turn: float  # rad: a planted foot that turned this far from its touchdown ...
+    pivot_step_s: float  # s ... is lifted this long (a step turn) while the other stands
     workers: int
 
 

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from pimann.intervals import true_runs
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import load_params
 from pimann.retarget.feet import (
@@ -17,6 +18,7 @@ from pimann.retarget.feet import (
     hysteresis,
     min_jerk,
     plan_soles,
+    step_pivots,
 )
 from pimann.retarget.ik import RetargetIK
 from pimann.robot import SEGMENTS
@@ -210,3 +212,23 @@ def test_a_sole_target_under_the_floor_stops_at_it(robot, params):
     for _ in range(20):
         q = ik.solve(pelvis, targets, sunk, (params.stance_weight,) * 2)
     assert _corner_heights(robot, q).min() < -0.02
+
+
+def test_a_turning_planted_foot_steps_while_the_other_stands():
+    n, step, turn = 60, 5, 0.35
+    contacts = np.ones((n, 2), bool)
+    headings = np.zeros((n, 2))
+    headings[:, 0] = np.linspace(0.0, 1.0, n)  # the left foot pivots by 1 rad
+    stepped = step_pivots(contacts, headings, turn, step)
+    assert stepped[:, 1].all()  # the right foot does not turn: it stays
+    lifts = [(a, b) for a, b in true_runs(~stepped[:, 0])]
+    assert len(lifts) == 2 and all(b - a == step for a, b in lifts)
+    for a, b in true_runs(stepped[:, 0]):  # one heading per footstep, to a frame's turn
+        assert np.ptp(headings[a:b, 0]) <= turn + 1.0 / (n - 1)
+    # the first lift starts where the turn first passes the limit
+    assert lifts[0][0] == np.argmax(headings[:, 0] > turn)
+    # with the other foot up, the turning foot waits for it to land
+    contacts[: lifts[0][0] + 10, 1] = False
+    waited = step_pivots(contacts, headings, turn, step)
+    assert np.flatnonzero(~waited[:, 0])[0] == lifts[0][0] + 10
+    assert waited.any(axis=1).all()

@@ -147,3 +147,31 @@ def test_a_flight_phase_keeps_a_foot_down_and_every_sole_above_the_floor(robot, 
     feet = foot_kinematics(robot, trajectory_configurations(robot, trajectory))
     assert lowest_corner_heights(feet.positions, feet.rotations).min() > -0.01
     assert trajectory.base_position[:, 2].min() > 0.5
+
+
+def test_a_pivot_turn_steps_instead_of_twisting_the_legs(params):
+    # the AvatarGoVR take turns 90 deg in about a second at 38.5 s with both feet low: a
+    # person pivots on them, the robot steps; kept planted (no pivot steps) the robot's
+    # thighs were 80-120 deg off the person's
+    from pimann.mocap.clips import slice_motion
+
+    path = mocap_dir() / "avatargovr/locomotion_vr_mid.bvh"
+    motion = read_take(take_of(path, params.data))
+    time = motion.time - motion.time[0]
+    start, stop = np.searchsorted(time, [37.0, 40.0])
+    part = slice_motion(motion, int(start), int(stop))
+    thighs = [SEGMENTS.index("LeftUpperLeg"), SEGMENTS.index("RightUpperLeg")]
+
+    def worst_thigh(retarget_params) -> tuple[float, int]:
+        trajectory = retarget_motion(part, retarget_params)
+        human = resample(part, retarget_params.rate_hz)
+        errors = frame_measures(human, trajectory, retarget_params)["orientation_error_deg"]
+        steps = int((np.diff(trajectory.contacts.astype(int), axis=0) == 1).sum())
+        assert trajectory.contacts.any(axis=1).all()
+        return float(np.percentile(errors[:, thighs], 95)), steps
+
+    stepping, steps = worst_thigh(params.retarget)
+    planted, planted_steps = worst_thigh(dataclasses.replace(params.retarget, release_turn=10.0))
+    assert planted > 60.0
+    assert stepping < planted / 2.0
+    assert steps > planted_steps

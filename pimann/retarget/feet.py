@@ -7,7 +7,8 @@ So the feet are planned first and the IK follows the plan (ik.py):
 1. Contacts from the person's heel and toe (`HumanMotion.contact_points`): a point is down
    while it is low and slow, with hysteresis (it must rise higher, move faster or travel
    farther from where it came down to come up again); a foot is down while either point
-   is. Short flickers are removed, double support is kept.
+   is. Short flickers are removed, double support is kept. A foot the person pivots on
+   steps instead (a robot sole cannot turn on the floor without sliding).
 2. Each contact run is one footstep: the robot's sole lies flat on the floor at one place
    and heading for the whole run: where the robot's own sole stands, on median, when its
    joints copy the person's (a first IK pass with the pelvis held; its legs are shorter, so
@@ -27,6 +28,8 @@ import numpy as np
 from pimann.intervals import true_runs
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
+from pimann.robot import SEGMENTS
+from pimann.rotations import yaw_of
 
 # share of a swing at each end with no horizontal motion. Short, so the sole clears the
 # evaluation's 2 cm contact height soon after lift-off and late before touchdown: with 0.2 and
@@ -98,7 +101,33 @@ def human_contacts(motion: HumanMotion, params: RetargetParams) -> np.ndarray:
             axis=-1,
         ).any(axis=-1)  # fmt: skip
         contacts[:, side] = debounce(down, min_on, min_off)
-    return bridge_flights(contacts)
+    feet = [SEGMENTS.index("LeftFoot"), SEGMENTS.index("RightFoot")]
+    headings = np.unwrap(yaw_of(motion.orientations[:, feet]), axis=0)
+    step = max(1, round(params.pivot_step_s * rate))
+    return bridge_flights(step_pivots(contacts, headings, params.release_turn, step))
+
+
+def step_pivots(
+    contacts: np.ndarray, headings: np.ndarray, max_turn: float, step: int
+) -> np.ndarray:
+    """(T, 2) contacts where a planted foot that turns (the person pivots on it) steps: once
+    its heading (`headings` (T, 2), unwrapped) is more than `max_turn` from where it came
+    down, it is lifted for `step` frames, if the other foot is down all that time (else
+    when it is), and comes down again at its new heading: one footstep keeps one heading."""
+    contacts = contacts.copy()
+    anchors: list[float | None] = [None, None]
+    for t in range(len(contacts)):
+        for side in range(2):
+            if not contacts[t, side]:
+                anchors[side] = None
+            elif anchors[side] is None:
+                anchors[side] = headings[t, side]
+            elif abs(headings[t, side] - anchors[side]) > max_turn:
+                lifted = slice(t, t + step)
+                if t + step < len(contacts) and contacts[lifted, 1 - side].all():
+                    contacts[lifted, side] = False
+                    anchors[side] = None
+    return contacts
 
 
 def bridge_flights(contacts: np.ndarray) -> np.ndarray:
