@@ -135,6 +135,11 @@ def test_the_plan_pins_stance_and_lifts_before_moving(params):
         assert plan.positions[~down, side, 2].max() >= params.swing_clearance
         # held hard near the footsteps, looser in mid-swing
         assert set(np.unique(plan.weights[:, side])) == {params.stance_weight, params.swing_weight}
+        # the person's leg takes the sole over only off the floor, fully at mid-swing
+        following = plan.leg_following[:, side]
+        assert np.all(following[down] == 0.0)
+        assert np.all(following[plan.positions[:, side, 2] < params.lift_height - 1e-9] == 0.0)
+        assert following.max() > 0.99 and np.all((following >= 0.0) & (following <= 1.0))
     assert 0.0 < SWING_VERTICAL < 0.5
 
 

@@ -175,3 +175,17 @@ def test_a_pivot_turn_steps_instead_of_twisting_the_legs(params):
     assert planted > 60.0
     assert stepping < planted / 2.0
     assert steps > planted_steps
+
+
+def test_a_walk_keeps_the_legs_close_to_the_persons(params):
+    """The whole dataset-1 normal walk: planted soles, vertical lifts and a mid-swing that
+    follows the person's leg relative to the base keep the thighs' p95 error under 21 deg
+    (23.8 with swings planned in the world alone; SPEC 3.1 asks 15)."""
+    motion = read_take(take_of(mocap_dir() / "bandai-namco/dataset" / REAL_CLIP, params.data))
+    trajectory = retarget_motion(motion, params.retarget)
+    measures = frame_measures(
+        resample(motion, params.retarget.rate_hz), trajectory, params.retarget
+    )
+    errors = summarize([measures])["orientation_error_deg"]
+    assert max(errors[s]["p95"] for s in ("LeftUpperLeg", "RightUpperLeg")) < 21.0
+    assert max(errors[s]["median"] for s in ("LeftLowerLeg", "RightLowerLeg")) < 9.0

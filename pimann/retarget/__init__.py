@@ -24,7 +24,7 @@ from pimann.params import Params, RetargetParams
 from pimann.retarget.feet import human_contacts, plan_soles
 from pimann.retarget.ik import RetargetIK
 from pimann.retarget.targets import leg_length_ratio, segment_targets
-from pimann.robot import SEGMENTS, load_robot
+from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, load_robot
 from pimann.rotations import rot_z, yaw_of
 from pimann.trajectory import Trajectory
 
@@ -37,7 +37,8 @@ def solve_joints(
     """(T, nq) IK configurations following the motion, in two passes. The first copies the
     person (pelvis pose held, segment orientations followed): where its soles stand during
     each contact is where the robot's own legs put its footsteps. The second pins the soles
-    on that plan (feet.py) and lets the base follow."""
+    on that plan (feet.py) and lets the base follow; mid-swing, a sole goes where the first
+    pass put it relative to the base."""
     robot = load_robot("retarget")
     rate = motion.rate_hz or params.rate_hz
     pelvis = SEGMENTS.index("Pelvis")
@@ -55,15 +56,47 @@ def solve_joints(
     plan = plan_soles(soles.positions, yaw_of(soles.rotations), contacts, motion.time, params)
     targets = segment_targets(motion, params, plan.headings)
     sole_rotations = rot_z(plan.headings)
+    copied = soles_in_base(robot, free)
     second = RetargetIK(robot, params, rate)
     second.reset(free[0])
     configurations = np.empty_like(free)
     for t in range(motion.n_frames):
-        planned = tuple(pin.SE3(sole_rotations[t, k], plan.positions[t, k]) for k in range(2))
+        planned = [pin.SE3(sole_rotations[t, k], plan.positions[t, k]) for k in range(2)]
+        if t >= 2 and plan.leg_following[t].any():
+            # mid-swing the sole goes where the person's leg puts it relative to the base
+            # (the base extrapolated from the last two frames), at the plan's height
+            base = _base_pose(robot, configurations[t - 1], configurations[t - 2])
+            for k in np.flatnonzero(plan.leg_following[t]):
+                share, leg = plan.leg_following[t, k], base * copied[t][k]
+                target = planned[k]
+                target.translation[:2] += share * (leg.translation[:2] - target.translation[:2])
+                turn = pin.log3(target.rotation.T @ leg.rotation)
+                target.rotation = target.rotation @ pin.exp3(share * turn)
         configurations[t] = _solve(
-            second, motion, t, placements[t], targets[t, 1:], planned, tuple(plan.weights[t])
+            second,
+            motion,
+            t,
+            placements[t],
+            targets[t, 1:],
+            tuple(planned),
+            tuple(plan.weights[t]),
         )
     return configurations
+
+
+def soles_in_base(robot: Robot, configurations: np.ndarray) -> list[list[pin.SE3]]:
+    """Per frame, the soles' poses in the base frame (left, right)."""
+    out = []
+    for q in configurations:
+        base = robot.frame_placement(q, "root_link").inverse()
+        out.append([base * robot.frame_placement(q, f) for f in (LEFT_SOLE, RIGHT_SOLE)])
+    return out
+
+
+def _base_pose(robot: Robot, last: np.ndarray, before: np.ndarray) -> pin.SE3:
+    """The base pose one frame after `last`, at its velocity from `before` to `last`."""
+    q = pin.integrate(robot.model, last, pin.difference(robot.model, before, last))
+    return robot.frame_placement(q, "root_link")
 
 
 def _solve(ik: RetargetIK, motion: HumanMotion, t: int, *args) -> np.ndarray:

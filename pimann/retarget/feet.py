@@ -17,6 +17,9 @@ So the feet are planned first and the IK follows the plan (ik.py):
    height, travels on a minimum-jerk path at least `swing_clearance` high in mid-swing,
    and sinks vertically onto the next footstep: no sole point moves horizontally while it
    is at floor height (nor while a contact rule on its height would call it down).
+   Off the floor the IK moves the sole's target, horizontally and in orientation, toward
+   where the person's leg puts it relative to the robot's base (`SolePlan.leg_following`,
+   fully at mid-swing): the robot's base is not where the person's scaled pelvis was.
 """
 
 from __future__ import annotations
@@ -160,6 +163,10 @@ class SolePlan:
     positions: np.ndarray  # (T, 2, 3) m
     headings: np.ndarray  # (T, 2) rad, the soles lie flat
     weights: np.ndarray  # (T, 2) IK cost of the sole pose
+    # (T, 2) in [0, 1]: how far a swinging sole's horizontal target moves from `positions`
+    # to where the person's leg puts it relative to the robot's base (0: planted or at a
+    # footstep's vertical lift or descent; 1: mid-swing)
+    leg_following: np.ndarray
 
 
 def plan_soles(
@@ -177,7 +184,9 @@ def plan_soles(
     free = soles - [0.0, 0.0, floor]
     free[..., 2] = np.maximum(free[..., 2], 0.0)
     yaw = np.unwrap(sole_yaw, axis=0)
-    plan = SolePlan(free.copy(), yaw.copy(), np.full(yaw.shape, params.stance_weight))
+    plan = SolePlan(
+        free.copy(), yaw.copy(), np.full(yaw.shape, params.stance_weight), np.zeros(yaw.shape)
+    )
     for side in range(2):
         steps = []
         for start, stop in true_runs(contacts[:, side]):
@@ -191,11 +200,11 @@ def plan_soles(
             s = (time[swing] - time[before[1] - 1]) / (time[after[0]] - time[before[1] - 1])
             # the free sole's path from its last stance frame to its first one
             around = slice(before[1] - 1, after[0] + 1)
-            path, heading, weight = swing_path(
+            path, heading, weight, following = swing_path(
                 s, before[2:], after[2:], free[around, side], yaw[around, side], params
             )
             plan.positions[swing, side], plan.headings[swing, side] = path, heading
-            plan.weights[swing, side] = weight
+            plan.weights[swing, side], plan.leg_following[swing, side] = weight, following
         _open_ends(plan, side, steps, free[:, side], yaw[:, side], time, params)
     return plan
 
@@ -207,15 +216,16 @@ def swing_path(
     free: np.ndarray,
     free_yaw: np.ndarray,
     params: RetargetParams,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Sole positions (n, 3), headings (n,) and IK weights (n,) of one swing at swing shares
-    s in (0, 1) from footstep `start` (place, heading) to `end`. Over the first and last
-    SWING_VERTICAL of the swing the sole only rises to (sinks from) `lift_height`, above the
-    contact threshold of the evaluation. In between it travels a minimum-jerk path between
-    the footsteps plus the free sole's departure from that path at the same time (`free`
-    (n+2, 3), `free_yaw` (n+2,), from its last stance frame to its next first one), faded
-    in and out, at least `swing_clearance` high at mid-swing or as high as the free sole
-    goes: close to what the copied leg does, so the leg keeps its angles."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sole positions (n, 3), headings (n,), IK weights (n,) and leg following (n,), see
+    SolePlan, of one swing at swing shares s in (0, 1) from footstep `start` (place,
+    heading) to `end`. Over the first and last SWING_VERTICAL of the swing the sole only
+    rises to (sinks from) `lift_height`, above the contact threshold of the evaluation. In
+    between it travels a minimum-jerk path between the footsteps plus the free sole's
+    departure from that path at the same time (`free` (n+2, 3), `free_yaw` (n+2,), from its
+    last stance frame to its next first one), faded in and out, at least `swing_clearance`
+    high at mid-swing or as high as the free sole goes: close to what the copied leg does,
+    so the leg keeps its angles."""
     edge = np.minimum(s, 1.0 - s)  # share of the swing to the nearer footstep
     sigma = np.clip((s - SWING_VERTICAL) / (1.0 - 2.0 * SWING_VERTICAL), 0.0, 1.0)
     progress = min_jerk(sigma)
@@ -236,7 +246,8 @@ def swing_path(
         (edge - SWING_VERTICAL) / SWING_VERTICAL
     )
     weight = np.where(edge < SWING_VERTICAL, params.stance_weight, params.swing_weight)
-    return np.column_stack([place, height]), heading, weight
+    following = np.where(edge < SWING_VERTICAL, 0.0, np.sin(np.pi * sigma) ** 2)
+    return np.column_stack([place, height]), heading, weight, following
 
 
 def _open_ends(
@@ -253,6 +264,7 @@ def _open_ends(
     whole swing would; a foot never down follows the free sole."""
     if not steps:
         plan.weights[:, side] = params.swing_weight
+        plan.leg_following[:, side] = 1.0
         return
     # the clip's median swing in seconds (frames times the frame period)
     swings = [b[0] - a[1] for a, b in zip(steps, steps[1:], strict=False)]
@@ -293,6 +305,8 @@ def _open_swing(
     plan.weights[frames, side] = np.where(
         away < vertical, params.stance_weight, params.swing_weight
     )
+    plan.leg_following[frames, side] = ramp
     plan.positions[anchor, side] = [*footstep[0], 0.0]
     plan.headings[anchor, side] = footstep[1]
     plan.weights[anchor, side] = params.stance_weight
+    plan.leg_following[anchor, side] = 0.0
