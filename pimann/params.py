@@ -143,6 +143,7 @@ class TrainParams:
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
     pi_support: Literal["lower_sole", "data_contacts"]  # which foot L_B keeps still
     pi_gradient: Literal["both", "joints", "base"]  # which predictions L_B's gradient moves
+    pi_dropout: bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
     max_train_samples: int | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]

@@ -143,15 +143,18 @@ class TrainingLoss(torch.nn.Module):
         target: torch.Tensor,
         with_pi: bool = True,
         contacts: torch.Tensor | None = None,
+        pi_prediction: torch.Tensor | None = None,
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False.
 
         `contacts` (E, B, 2): the data's feet in contact, needed with pi_support data_contacts.
+        `pi_prediction`: the prediction L_B is taken on, when not `prediction` (train.pi_dropout
+        false: the same inputs without dropout).
         """
         mse = (prediction - target).square().mean(dim=(-2, -1))
         if not with_pi:
             return mse, torch.zeros_like(mse)
-        terms = self.pi_terms(prediction)
+        terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
         if self.pi_support == "data_contacts":
             if contacts is None:
                 raise ValueError("pi_support data_contacts needs the samples' contacts")
@@ -420,7 +423,13 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         for start in range(0, n, batch):
             index = order[:, start : start + batch]
             contacts = None if c_train is None else c_train[index]
-            mse, pi = loss_fn(model(x_train[index]), y_train[index], with_pi_train, contacts)
+            prediction = model(x_train[index])
+            deterministic = None
+            if with_pi_train and not config.pi_dropout:
+                model.eval()
+                deterministic = model(x_train[index])
+                model.train()
+            mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, deterministic)
             optimizer.zero_grad(set_to_none=True)
             (mse + pi_weight * pi).sum().backward()
             optimizer.step()
