@@ -306,3 +306,33 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
     joints = grad[..., s["joint_velocities"]]
     assert (base.abs().max() > 0) == (side != "joints")
     assert (joints.abs().max() > 0) == (side != "base")
+
+
+def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_path):
+    """pi_dropout false: L_B is the dropout-free prediction's (the eval-mode network's), L_D
+    keeps its dropout; the training then differs from the paper's and stays deterministic."""
+    from pimann.features import read_dataset
+
+    data = read_dataset(dataset_path)
+    loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
+    model = MANN.from_seeds(130, 100, SMALL_MODEL, [0])
+    x = torch.as_tensor(data.x_train[None, :32])
+    y = torch.as_tensor(data.y_train[None, :32])
+    model.seed_dropout([1])
+    noisy = model.train()(x)
+    clean = model.eval()(x)
+    mse, pi = loss(noisy, y, pi_prediction=clean)
+    assert torch.equal(mse, loss(noisy, y)[0])
+    assert torch.equal(pi, loss(clean, y)[1])
+    assert not torch.allclose(pi, loss(noisy, y)[1])
+
+    off = dataclasses.replace(
+        params, train=dataclasses.replace(params.train, pi_dropout=False, epochs=1)
+    )
+    on = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    for name, run in (("off", off), ("off_again", off), ("on", on)):
+        train_models(dataset_path, tmp_path / name, 10.0, [0], run, "cpu")
+    a, b = _weights(tmp_path / "off" / "0"), _weights(tmp_path / "off_again" / "0")
+    c = _weights(tmp_path / "on" / "0")
+    assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
+    assert not torch.equal(a["expert_weight_2"], c["expert_weight_2"])
