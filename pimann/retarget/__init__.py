@@ -15,7 +15,7 @@ import numpy as np
 import pinocchio as pin
 from pink.exceptions import PinkError
 
-from pimann.contacts import foot_kinematics
+from pimann.contacts import FootKinematics, foot_kinematics
 from pimann.errors import PimannError
 from pimann.mocap.clips import Clip, Take, clip_motion, read_take, take_clips, take_of
 from pimann.mocap.human_motion import HumanMotion
@@ -24,7 +24,7 @@ from pimann.params import Params, RetargetParams
 from pimann.retarget.feet import human_contacts, plan_soles
 from pimann.retarget.ik import RetargetIK
 from pimann.retarget.targets import leg_length_ratio, segment_targets
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, load_robot
+from pimann.robot import SEGMENTS, Robot, load_robot
 from pimann.rotations import rot_z, yaw_of
 from pimann.trajectory import Trajectory
 
@@ -56,7 +56,7 @@ def solve_joints(
     plan = plan_soles(soles.positions, yaw_of(soles.rotations), contacts, motion.time, params)
     targets = segment_targets(motion, params, plan.headings)
     sole_rotations = rot_z(plan.headings)
-    copied = soles_in_base(robot, free)
+    copied = soles_in_base(free, soles)
     second = RetargetIK(robot, params, rate)
     second.reset(free[0])
     configurations = np.empty_like(free)
@@ -84,19 +84,20 @@ def solve_joints(
     return configurations
 
 
-def soles_in_base(robot: Robot, configurations: np.ndarray) -> list[list[pin.SE3]]:
-    """Per frame, the soles' poses in the base frame (left, right)."""
+def soles_in_base(configurations: np.ndarray, soles: FootKinematics) -> list[list[pin.SE3]]:
+    """Per frame, the soles' poses (`soles`, world) in the base frame (left, right)."""
     out = []
-    for q in configurations:
-        base = robot.frame_placement(q, "root_link").inverse()
-        out.append([base * robot.frame_placement(q, f) for f in (LEFT_SOLE, RIGHT_SOLE)])
+    for t, q in enumerate(configurations):
+        base = pin.XYZQUATToSE3(q[:7]).inverse()  # the floating base is the root_link frame
+        out.append([base * pin.SE3(soles.rotations[t, k], soles.positions[t, k]) for k in (0, 1)])
     return out
 
 
 def _base_pose(robot: Robot, last: np.ndarray, before: np.ndarray) -> pin.SE3:
     """The base pose one frame after `last`, at its velocity from `before` to `last`."""
-    q = pin.integrate(robot.model, last, pin.difference(robot.model, before, last))
-    return robot.frame_placement(q, "root_link")
+    return pin.XYZQUATToSE3(
+        pin.integrate(robot.model, last, pin.difference(robot.model, before, last))[:7]
+    )
 
 
 def _solve(ik: RetargetIK, motion: HumanMotion, t: int, *args) -> np.ndarray:

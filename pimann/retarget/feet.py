@@ -163,9 +163,9 @@ class SolePlan:
     positions: np.ndarray  # (T, 2, 3) m
     headings: np.ndarray  # (T, 2) rad, the soles lie flat
     weights: np.ndarray  # (T, 2) IK cost of the sole pose
-    # (T, 2) in [0, 1]: how far a swinging sole's horizontal target moves from `positions`
-    # to where the person's leg puts it relative to the robot's base (0: planted or at a
-    # footstep's vertical lift or descent; 1: mid-swing)
+    # (T, 2) in [0, 1]: how far a swinging sole's target (horizontal place and orientation)
+    # moves from the plan to where the person's leg puts it relative to the robot's base
+    # (0: planted or at a footstep's vertical lift or descent; 1: mid-swing)
     leg_following: np.ndarray
 
 
@@ -229,24 +229,25 @@ def swing_path(
     edge = np.minimum(s, 1.0 - s)  # share of the swing to the nearer footstep
     sigma = np.clip((s - SWING_VERTICAL) / (1.0 - 2.0 * SWING_VERTICAL), 0.0, 1.0)
     progress = min_jerk(sigma)
+    fade = np.sin(np.pi * sigma) ** 2  # the free sole's share: 0 at the ends, 1 mid-swing
     # the free sole at the same point of its own swing, and its departure from the straight
     # (minimum-jerk) path between its ends
     own = np.linspace(0.0, 1.0, len(free))
     free_at = np.column_stack([np.interp(s, own, free[:, k]) for k in range(3)])
     chord = free[0] + progress[:, None] * (free[-1] - free[0])
-    departure = (free_at - chord) * np.sin(np.pi * sigma)[:, None] ** 2
+    departure = (free_at - chord) * fade[:, None]
     place = start[0] + progress[:, None] * (end[0] - start[0]) + departure[:, :2]
     yaw_departure = np.interp(s, own, free_yaw) - (
         free_yaw[0] + progress * (free_yaw[-1] - free_yaw[0])
     )
-    heading = start[1] + progress * (end[1] - start[1]) + yaw_departure * np.sin(np.pi * sigma) ** 2
+    heading = start[1] + progress * (end[1] - start[1]) + yaw_departure * fade
     up = params.lift_height * min_jerk(edge / SWING_VERTICAL)
     high = np.maximum(params.swing_clearance * np.sin(np.pi * s), free_at[:, 2])
     height = up + np.maximum(high - params.lift_height, 0.0) * min_jerk(
         (edge - SWING_VERTICAL) / SWING_VERTICAL
     )
     weight = np.where(edge < SWING_VERTICAL, params.stance_weight, params.swing_weight)
-    following = np.where(edge < SWING_VERTICAL, 0.0, np.sin(np.pi * sigma) ** 2)
+    following = np.where(edge < SWING_VERTICAL, 0.0, fade)
     return np.column_stack([place, height]), heading, weight, following
 
 

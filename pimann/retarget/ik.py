@@ -1,18 +1,17 @@
 """Whole-body differential IK with pink: the robot follows the human segment orientations.
 
 The feet follow the sole targets of feet.py (full poses): a planted sole weighs
-`stance_weight` and stays where it was put down, a swinging one `swing_weight`; no sole corner
-goes under the floor. The pelvis
-follows the person's pelvis orientation and the scaled pelvis position at lower weights, so
-the base goes wherever the planted feet let it (the robot's legs are shorter than the
-person's). The 10 other segments are orientation-only costs on the robot's `data_<Segment>`
-frames (the robot is smaller than the person, so positions of limbs cannot match,
-orientations can). A small posture cost regularises redundant directions. The trunk (T8,
-Head) weighs more than the limbs: where an arm
-reaches a joint limit, the chest should not tilt to make up for it. Joint limits, a minimum
-shoulder roll and a minimum lateral foot spacing (in the pelvis frame, to keep the legs
-apart: the dataset-1 actor walks with the ankles 2.6 cm apart) are QP inequalities. Each
-frame runs a few QP iterations warm-started from the previous frame's solution.
+`stance_weight` and stays where it was put down, a swinging one `swing_weight`; no sole
+corner goes under the floor (a QP inequality). The pelvis follows the person's pelvis
+orientation and the scaled pelvis position at lower weights, so the base goes wherever the
+planted feet let it (the robot's legs are shorter than the person's). The 10 other segments
+are orientation-only costs on the robot's `data_<Segment>` frames (the robot is smaller than
+the person, so positions of limbs cannot match, orientations can). A small posture cost
+regularises redundant directions. The trunk (T8, Head) weighs more than the limbs: where an
+arm reaches a joint limit, the chest should not tilt to make up for it. Joint limits, a
+minimum shoulder roll and a minimum lateral foot spacing (in the pelvis frame, to keep the
+legs apart: the dataset-1 actor walks with the ankles 2.6 cm apart) are QP inequalities.
+Each frame runs a few QP iterations warm-started from the previous frame's solution.
 
 pink gains are unitless per-iteration low-pass factors in (0, 1]; the paper's gains are
 rates (1/s). They are converted as gain * `gain_time_step`, capped at 1.
