@@ -304,3 +304,24 @@ def test_cli_unknown_skeleton_is_one_line(capsys):
     assert main(["mocap-info", str(mocap_dir() / BANDAI), "--skeleton", "nope"]) == 2
     err = capsys.readouterr().err.strip()
     assert "unknown skeleton 'nope'" in err and len(err.splitlines()) == 1
+
+
+def test_hyperextended_standing_knees_keep_the_thighs_facing_forward(tmp_path, rng):
+    """A standing rig whose straight knees bend 3 deg backwards (7 of the 10 ReActIdle takes):
+    the flexion axis points right, and taken as it is it would turn the thighs half round."""
+    joints = humanoid()
+    n = 60
+    root = np.tile([0.0, 95.0, 0.0], (n, 1))
+    rotvec = np.radians(rng.uniform(-1, 1, (n, len(joints), 3)))
+    names = [j.name for j in joints]
+    for side in ("Left", "Right"):
+        rotvec[:, names.index(side + "LowerLeg"), 0] = np.radians(-3.0)
+    local = Rotation.from_rotvec(rotvec.reshape(-1, 3)).as_matrix().reshape(n, len(joints), 3, 3)
+    path = tmp_path / "standing.bvh"
+    path.write_text(bvh_text(joints, root, local))
+    motion = read_bvh(path)
+    pelvis_forward = motion.segment("Pelvis")[:, :, 0]
+    for side in ("Left", "Right"):
+        thigh_forward = motion.segment(side + "UpperLeg")[:, :, 0]
+        cos = np.einsum("ti,ti->t", thigh_forward, pelvis_forward)
+        assert np.degrees(np.arccos(np.clip(cos, -1, 1))).max() < 10.0, side

@@ -216,7 +216,11 @@ def calibrate_segments(body: BodyLandmarks, path: str | Path | None = None) -> n
     for s, (side, sign) in enumerate(zip(SIDES, (1.0, -1.0), strict=True)):
         hip, knee = o[:, _index(side + "UpperLeg")], o[:, _index(side + "LowerLeg")]
         ankle = o[:, _index(side + "Foot")]
-        knee_axis = weighted_or(_hinge_axis(hip - knee, ankle - knee), hips)  # y: left
+        # y: left. A knee flexes about the hips' left; per frame, as a standing rig's
+        # straight knee may "bend" slightly backwards and would flip the thigh otherwise
+        hinge = _hinge_axis(hip - knee, ankle - knee)
+        hinge *= np.where(np.einsum("ij,ij->i", hinge, hips) < 0.0, -1.0, 1.0)[:, None]
+        knee_axis = weighted_or(hinge, hips)
         put(side + "UpperLeg", hip - knee, 2, knee_axis, 1)
         put(side + "LowerLeg", knee - ankle, 2, knee_axis, 1)
         toe = body.toes[:, s]
