@@ -23,7 +23,7 @@ import pinocchio as pin
 
 from pimann.errors import PimannError, require_finite
 from pimann.params import EvaluateParams, load_params
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SOLE_CORNERS, Robot
+from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SOLE_CORNERS, Robot, corner_offsets
 from pimann.trajectory import Trajectory
 
 FEET = (LEFT_SOLE, RIGHT_SOLE)  # the column order of every (T, 2, ...) foot array
@@ -142,7 +142,7 @@ def lowest_corner_heights(
     positions: np.ndarray, rotations: np.ndarray, corners: np.ndarray = SOLE_CORNERS
 ) -> np.ndarray:
     """Height of the lowest corner: min over corners c of z(p + R c), vectorised over frames."""
-    return positions[..., 2] + np.min(rotations[..., 2, :] @ corners.T, axis=-1)
+    return positions[..., 2] + corner_offsets(rotations, corners)[..., 2].min(axis=-1)
 
 
 def trajectory_configurations(robot: Robot, trajectory: Trajectory) -> np.ndarray:

@@ -75,7 +75,7 @@ from pimann.motion_classes import (
 )
 from pimann.parallel import pool_map
 from pimann.params import FiguresParams, Params, as_dict
-from pimann.robot import SOLE_CORNERS, load_robot
+from pimann.robot import SOLE_CORNERS, corner_offsets, load_robot
 from pimann.trajectory import Trajectory, iter_collection
 
 # ----------------------------------------------------------------------------- thresholds
@@ -154,7 +154,7 @@ def data_pi_loss(trajectory: Trajectory, params: Params) -> dict[str, np.ndarray
 
 def _corner_speeds(positions, rotations, velocities) -> tuple[np.ndarray, np.ndarray]:
     """(T, 2, C) heights and horizontal speeds of the sole corners (LOCAL_WORLD_ALIGNED v)."""
-    offsets = np.swapaxes(rotations @ SOLE_CORNERS.T, -1, -2)  # (T, 2, C, 3) world R c
+    offsets = corner_offsets(rotations)  # (T, 2, C, 3)
     heights = positions[..., None, 2] + offsets[..., 2]
     linear = velocities[..., None, :3] + np.cross(velocities[..., None, 3:], offsets)
     return heights, np.linalg.norm(linear[..., :2], axis=-1)

@@ -65,6 +65,13 @@ SOLE_CORNERS = np.array(
     ]
 )
 
+
+def corner_offsets(rotations: np.ndarray, corners: np.ndarray = SOLE_CORNERS) -> np.ndarray:
+    """(..., C, 3) the sole corners from the sole origin in world axes (R c), for sole
+    rotations (..., 3, 3): every stage that asks where a sole meets the floor asks it here."""
+    return np.swapaxes(rotations @ corners.T, -1, -2)
+
+
 # What each robot variant reads from the shared robots folder: its URDF, and the mesh folder
 # MuJoCo loads with it (pinocchio builds kinematics only and reads no mesh). The DVC stages
 # list these files as deps (tests/test_dvc_deps.py finds every use of these names).

@@ -172,7 +172,7 @@ def _corner_heights(robot, q) -> np.ndarray:
     heights = []
     for frame in ("l_sole", "r_sole"):
         placement = robot.frame_placement(q, frame)
-        heights.append((SOLE_CORNERS @ placement.rotation.T + placement.translation)[:, 2])
+        heights.append([placement.act(corner)[2] for corner in SOLE_CORNERS])
     return np.concatenate(heights)
 
 

@@ -26,7 +26,7 @@ from pink.limits import ConfigurationLimit, Limit
 from pink.tasks import FrameTask, PostureTask
 
 from pimann.params import RetargetParams
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot
+from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, corner_offsets
 
 FEET = ("LeftFoot", "RightFoot")
 SHOULDER_ROLLS = ("l_shoulder_roll", "r_shoulder_roll")
@@ -71,7 +71,7 @@ class FloorLimit(Limit):
         for frame in self.frames:
             placement = data.oMf[frame]
             jacobian = pin.getFrameJacobian(self.model, data, frame, pin.LOCAL_WORLD_ALIGNED)
-            for offset in SOLE_CORNERS @ placement.rotation.T:  # corners from the sole origin
+            for offset in corner_offsets(placement.rotation):
                 # z of v + omega x r: v_z + omega_x r_y - omega_y r_x
                 rows.append(jacobian[2] + offset[1] * jacobian[3] - offset[0] * jacobian[4])
                 heights.append(placement.translation[2] + offset[2])

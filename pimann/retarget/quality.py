@@ -13,7 +13,15 @@ from pimann.contacts import trajectory_configurations
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 from pimann.retarget.targets import segment_targets
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, load_robot
+from pimann.robot import (
+    JOINT_NAMES,
+    LEFT_SOLE,
+    RIGHT_SOLE,
+    SEGMENTS,
+    SOLE_CORNERS,
+    corner_offsets,
+    load_robot,
+)
 from pimann.trajectory import Trajectory
 
 AT_LIMIT_RAD = 0.01  # a joint within this of a bound counts as "at its limit"
@@ -53,7 +61,7 @@ def frame_measures(
         for k, frame in enumerate(sole_frames):
             placement = data.oMf[frame]
             soles[t, k] = placement.translation
-            corners[t, k] = SOLE_CORNERS @ placement.rotation.T + placement.translation
+            corners[t, k] = placement.translation + corner_offsets(placement.rotation)
             shanks[t, k] = data.oMi[knees[k]].translation, data.oMi[ankles[k]].translation
     targets = segment_targets(motion, params)
     relative = np.swapaxes(rotations, -1, -2) @ targets
