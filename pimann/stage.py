@@ -69,10 +69,16 @@ def _data_problems(reads: tuple[str, ...]) -> list[str]:
 
 def _record_time(started: float, wall_s: float, times_dir: Path | None) -> None:
     """The stage's record, when DVC runs it (a run by hand is no run of the pipeline)."""
-    from pimann.stage_times import STAGE_ENV, TIMES_DIR, stage_record, write_record
+    from pimann.stage_times import (
+        GATHERING_STAGE,
+        STAGE_ENV,
+        TIMES_DIR,
+        stage_record,
+        write_record,
+    )
 
     stage = os.environ.get(STAGE_ENV)
-    if not stage:
+    if not stage or stage == GATHERING_STAGE:
         log.info("done in %.1f s", wall_s)
         return
     from pimann.params import load_params

@@ -21,6 +21,9 @@ STAGE_ENV = "DVC_STAGE"  # set by `dvc repro` for every stage command
 TIMES_FOLDER = "stage_times"  # in results/: one <stage>.json per stage
 TIMES_DIR = f"results/{TIMES_FOLDER}"
 SUMMARY_FILE = "stage_times.json"  # in results/, written by the report stage
+# the stage that gathers the records keeps none of its own: it would gather the previous
+# run's (and write into its own dependency)
+GATHERING_STAGE = "report"
 
 
 def _iso(seconds: float) -> str:
