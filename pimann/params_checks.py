@@ -76,6 +76,7 @@ RANGES: dict[str, Bound] = {
     "model.*_layers": AT_LEAST_ONE,
     "model.dropout": Bound(0.0, 1.0, closed_high=False),
     "train.pi_weights.*": NON_NEGATIVE,
+    "train.input_noise": NON_NEGATIVE,
     "train.seeds.*": NON_NEGATIVE,
     "train.epochs": AT_LEAST_ONE,
     "train.batch_size": AT_LEAST_ONE,

@@ -91,6 +91,35 @@ def _dropout_seed(seed: int, epoch: int) -> int:
     return int(np.random.SeedSequence([seed, epoch, 0x5EED]).generate_state(1)[0])
 
 
+class InputNoise:
+    """train.input_noise: Gaussian noise on the inputs a rollout feeds back from its own
+    predictions (FeatureLayout.fed_back_columns), so the network learns to lead a state that
+    has drifted off the data back to it. Each member draws from its own seed and epoch."""
+
+    def __init__(self, std: float, columns: np.ndarray, seeds: list[int], device: torch.device):
+        self.std, self.seeds, self.device = std, seeds, device
+        self.columns = torch.as_tensor(columns, dtype=torch.float32, device=device)
+        self.generators: list[torch.Generator] = []
+
+    def start_epoch(self, epoch: int) -> None:
+        self.generators = [
+            torch.Generator(self.device).manual_seed(_dropout_seed(seed, epoch) ^ 0x401)
+            for seed in self.seeds
+        ]
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        """x (E, B, in) with noise on the fed-back columns; x itself where std is 0."""
+        if self.std == 0.0:
+            return x
+        noise = torch.stack(
+            [
+                torch.randn(x.shape[1:], generator=g, device=self.device, dtype=x.dtype)
+                for g in self.generators
+            ]
+        )
+        return x + self.std * noise * self.columns
+
+
 # per `train.pi_gradient`: the predictions L_B's gradient does not move
 _HELD = {
     "both": (),
@@ -405,6 +434,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
 
     with_pi_train = pi_weight != 0.0
+    noise = InputNoise(config.input_noise, data.layout.fed_back_columns(), seeds, device)
     last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
     progress = Progress(
         config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
@@ -416,6 +446,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             group["lr"] = config.learning_rate * factor
             group["weight_decay"] = weight_decay * factor
         model.seed_dropout([_dropout_seed(seed, epoch) for seed in seeds])
+        noise.start_epoch(epoch)
         order = torch.as_tensor(
             np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
         )  # (E, N)
@@ -423,11 +454,12 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         for start in range(0, n, batch):
             index = order[:, start : start + batch]
             contacts = None if c_train is None else c_train[index]
-            prediction = model(x_train[index])
+            x = noise(x_train[index])
+            prediction = model(x)
             deterministic = None
             if with_pi_train and not config.pi_dropout:
                 model.eval()
-                deterministic = model(x_train[index])
+                deterministic = model(x)
                 model.train()
             mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, deterministic)
             optimizer.zero_grad(set_to_none=True)

@@ -20,6 +20,7 @@ from pimann.features import Normalisation, build_dataset, window_layout, write_d
 from pimann.mann import MANN
 from pimann.params import ModelParams, load_params
 from pimann.train import (
+    InputNoise,
     TrainingLoss,
     epoch_order,
     load_model,
@@ -336,3 +337,52 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
     c = _weights(tmp_path / "on" / "0")
     assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
     assert not torch.equal(a["expert_weight_2"], c["expert_weight_2"])
+
+
+def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(dataset_path):
+    from pimann.features import read_dataset
+
+    layout = read_dataset(dataset_path).layout
+    mask = layout.fed_back_columns()
+    names = np.array(layout.names("x"))
+    fed = {name.split("[")[0].split(".")[0] for name in names[mask]}
+    assert fed == {"base_linear_window", "base_angular_window", "joints", "joint_velocities"}
+    for name, on in zip(names, mask, strict=True):
+        if "_window[" in name:  # e.g. base_linear_window[-50].x: offsets in frames
+            assert on == (int(name.split("[")[1].split("]")[0]) <= 0), name
+    assert not mask[layout.x_slices["base_rpy"]].any()
+
+
+def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_path):
+    """Each member's noise comes from its own seed and epoch: alike in any group, new each
+    epoch; nothing where the std is 0 (the paper)."""
+    from pimann.features import read_dataset
+
+    data = read_dataset(dataset_path)
+    columns = data.layout.fed_back_columns()
+    x = torch.as_tensor(np.stack([data.x_train[:16]] * 2))
+    cpu = torch.device("cpu")
+    assert InputNoise(0.0, columns, [0, 1], cpu)(x) is x
+    pair, alone = InputNoise(0.2, columns, [0, 1], cpu), InputNoise(0.2, columns, [1], cpu)
+    pair.start_epoch(3)
+    alone.start_epoch(3)
+    moved = pair(x) - x
+    assert torch.equal(moved[:, :, ~columns], torch.zeros_like(moved[:, :, ~columns]))
+    assert moved[:, :, columns].std().item() == pytest.approx(0.2, rel=0.15)
+    torch.testing.assert_close(alone(x[1:]) - x[1:], moved[1:])
+    assert not torch.allclose(moved[0], moved[1])
+    pair.start_epoch(4)
+    assert not torch.allclose(pair(x) - x, moved)
+
+
+def test_input_noise_trains_differently_and_deterministically(tmp_path, params, dataset_path):
+    one_epoch = dataclasses.replace(params.train, epochs=1)
+    noisy = dataclasses.replace(one_epoch, input_noise=0.2)
+    for name, train in (("plain", one_epoch), ("noisy", noisy), ("noisy_again", noisy)):
+        run = dataclasses.replace(params, train=train)
+        train_models(dataset_path, tmp_path / name, 0.0, [0], run, "cpu")
+    a, b = _weights(tmp_path / "noisy" / "0"), _weights(tmp_path / "noisy_again" / "0")
+    assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
+    assert not torch.equal(
+        a["expert_weight_2"], _weights(tmp_path / "plain" / "0")["expert_weight_2"]
+    )
