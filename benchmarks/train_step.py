@@ -37,14 +37,24 @@ P, PSI = slice(94, 97), slice(97, 100)
 EPOCHS, SAMPLES = 150, 254_000
 
 
-def make_step(model, pi_loss, mean, std, pi_weight):
+def make_step(model, pi_loss, mean, std, pi_weight, clean: str | None = None):
+    """One AdamW step; `clean` (train.pi_dropout: false): L_B on the dropout-free prediction,
+    from a second eval-mode pass ("two_pass") or one doubled pass ("fused", what train does)."""
     optimiser = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=0.0025, fused=True)
 
     def step(x, y):
-        prediction = model(x)
+        pi_prediction = None
+        if clean == "fused":
+            prediction, pi_prediction = model.forward_with_clean(x)
+        else:
+            prediction = model(x)
+        if clean == "two_pass":
+            pi_prediction = model.eval()(x)
+            model.train()
         loss = (prediction - y).square().mean(dim=(-2, -1)).sum()  # summed over members
         if pi_weight:
-            phys = prediction * std + mean  # denormalised prediction, physical units
+            pi_prediction = prediction if pi_prediction is None else pi_prediction
+            phys = pi_prediction * std + mean  # denormalised prediction, physical units
             pi = pi_loss(
                 phys[..., P], phys[..., PSI], phys[..., S], phys[..., V], phys[..., W],
                 phys[..., SDOT],
@@ -155,6 +165,17 @@ def main() -> None:
             rates[ensemble, batch] = row = throughputs(steps, ensemble, batch, args.seconds, device)
             plain, pi = row
             print(f"{ensemble:>7} {batch:>6} {plain:>16.0f} {pi:>13.0f} {plain / pi:>9.2f}")
+    print("L_B on the dropout-free prediction (train.pi_dropout: false), 1 model, batch 32:")
+    steps = []
+    for clean in (None, "two_pass", "fused"):
+        torch.manual_seed(0)
+        model = MANN(INPUT_DIM, OUTPUT_DIM, params).to(device).train()
+        steps.append(make_step(model, pi_loss, mean, std, 10.0, clean))
+    same, two_pass, fused = throughputs(steps, 1, 32, args.seconds, device)
+    print(
+        f"  time over pi_dropout true: two passes {same / two_pass:.2f}x, "
+        f"one doubled pass {same / fused:.2f}x (two/one {fused / two_pass:.2f}x)"
+    )
     model_epochs = EPOCHS * SAMPLES
     single = model_epochs / rates[1, 32][1] / 3600
     # sweep: 26 models = 5 PI weights x 5 seeds (one 5-member ensemble per weight; w = 0 runs

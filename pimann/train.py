@@ -455,13 +455,12 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             index = order[:, start : start + batch]
             contacts = None if c_train is None else c_train[index]
             x = noise(x_train[index])
-            prediction = model(x)
-            deterministic = None
+            clean = None
             if with_pi_train and not config.pi_dropout:
-                model.eval()
-                deterministic = model(x)
-                model.train()
-            mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, deterministic)
+                prediction, clean = model.forward_with_clean(x)
+            else:
+                prediction = model(x)
+            mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, clean)
             optimizer.zero_grad(set_to_none=True)
             (mse + pi_weight * pi).sum().backward()
             optimizer.step()

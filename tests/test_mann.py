@@ -117,6 +117,32 @@ def test_seeded_dropout_is_per_member(params):
     assert (dropped == 0).float().mean().item() == pytest.approx(params.dropout, abs=0.01)
 
 
+def test_forward_with_clean_equals_a_training_and_an_eval_pass(params):
+    """One doubled pass gives the same dropout-perturbed prediction (same draws) and the
+    eval-mode one, and gradients through both halves equal the two-pass ones."""
+    x = torch.randn(2, 16, IN, generator=torch.Generator().manual_seed(7))
+    fused = MANN.from_seeds(IN, OUT, params, [3, 4]).train()
+    twice = MANN.from_seeds(IN, OUT, params, [3, 4]).train()
+    fused.seed_dropout([10, 20])
+    twice.seed_dropout([10, 20])
+    dropped, clean = fused.forward_with_clean(x)
+    expected_dropped = twice(x)
+    twice.eval()
+    expected_clean = twice(x)
+    twice.train()
+    torch.testing.assert_close(dropped, expected_dropped, rtol=1e-5, atol=1e-6)
+    torch.testing.assert_close(clean, expected_clean, rtol=1e-5, atol=1e-6)
+    assert (dropped - clean).abs().max() > 1e-3  # the first half did get dropout
+    (dropped.square().sum() + 2 * clean.sum()).backward()
+    (expected_dropped.square().sum() + 2 * expected_clean.sum()).backward()
+    for (name, a), b in zip(fused.named_parameters(), twice.parameters(), strict=True):
+        torch.testing.assert_close(a.grad, b.grad, rtol=1e-4, atol=1e-6, msg=name)
+    single = MANN(IN, OUT, params, seeds=[0]).eval()  # 2-D input, eval mode: both clean
+    first, second = single.forward_with_clean(x[0])
+    assert first.shape == (16, OUT)
+    torch.testing.assert_close(first, second, rtol=0, atol=0)
+
+
 def test_rejects_wrong_shapes(params):
     with pytest.raises(ValueError, match="x must be"):
         MANN.from_seeds(IN, OUT, params, [0, 1])(torch.zeros(4, IN))
