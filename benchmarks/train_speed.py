@@ -18,7 +18,8 @@ import torch
 from pimann.features import Normalisation, window_layout
 from pimann.mann import MANN
 from pimann.params import load_params
-from pimann.train import TrainingLoss, pick_device
+from pimann.train import pick_device
+from pimann.training_loss import TrainingLoss
 
 
 def main() -> None:

@@ -202,11 +202,12 @@ class BatchGenerator:
         out_offsets = np.asarray(layout.output_offsets, dtype=float)
         self.current = layout.current_output
         self.history_length = max(1, int(-in_offsets.min()) + 1)
-        self.past_offsets = in_offsets[in_offsets <= 0]
+        self.past_offsets = np.asarray(layout.past_input_offsets(), dtype=int)
         if not np.all(np.diff(in_offsets) > 0):
             raise PimannError(None, "the input window's offsets must increase")
         # velocity at step i + o (o > 0) is the previous prediction's sample at offset o + 1
-        self.future_matrix = _interpolation(in_offsets[in_offsets > 0] + 1.0, out_offsets)
+        future_offsets = in_offsets[len(self.past_offsets) :]
+        self.future_matrix = _interpolation(future_offsets + 1.0, out_offsets)
         self.horizon = out_offsets.max() / layout.rate_hz
         span = max(out_offsets.max(), 1.0)
         self.weights = (np.clip(out_offsets / span, 0, 1) ** params.command_blend_tau)[:, None]

@@ -25,7 +25,7 @@ generated trajectories is applied here, with the same functions and contact rule
   that are within `GLIDE_HEIGHT` of the floor (z = 0), LOCAL_WORLD_ALIGNED corner velocities
   v + omega x (R c); a clean foot is still once down (target <= `GLIDE_TARGET`).
 - The data's own L_B (pimann.physics_loss), computed exactly as training computes it on a
-  sample (pimann.train.TrainingLoss on the output y_i of pimann.features.clip_features), on
+  sample (pimann.training_loss.TrainingLoss on the output y_i of pimann.features.clip_features), on
   the ground-truth outputs of every sample of the collection (training and test clips alike,
   built here from the collection, not from the features file), with `lower_sole` and with
   `data_contacts` (the settled flags of pimann.features.settled_contacts).
@@ -118,7 +118,7 @@ def _training_loss(layout):
     import torch
 
     from pimann.features import Normalisation
-    from pimann.train import TrainingLoss
+    from pimann.training_loss import TrainingLoss
 
     stats = Normalisation(
         np.zeros(layout.input_dim),

@@ -97,12 +97,17 @@ class FeatureLayout:
         """output: base_linear_future, base_angular_future, joints, ... (state at i)."""
         return self._slices(self._blocks("future", len(self.output_offsets)))
 
+    def past_input_offsets(self) -> list[int]:
+        """The input window's samples up to now (offsets <= 0): a rollout fills them from its
+        own earlier predictions, the later ones from the command."""
+        return [offset for offset in self.input_offsets if offset <= 0]
+
     def fed_back_columns(self) -> np.ndarray:
         """(input_dim,) bool: the input a rollout fills from its own earlier predictions (the
         velocity window up to now, the joints and their velocities), not from the command."""
         mask = np.zeros(self.input_dim, dtype=bool)
         slices = self.x_slices
-        past = np.repeat(np.asarray(self.input_offsets) <= 0, 3)
+        past = np.repeat(np.isin(self.input_offsets, self.past_input_offsets()), 3)
         for block in ("base_linear_window", "base_angular_window"):
             mask[slices[block]] = past
         for block in ("joints", "joint_velocities"):

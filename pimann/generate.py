@@ -266,8 +266,8 @@ def _model_rollouts(
     Attributes as the files have always had them: scenario, model_dir, script, pi_weight,
     seed, variant, start_pose, steering.
     """
+    from pimann.model_files import META_FILE, load_model
     from pimann.rollout_layout import SCRIPT_ATTR, script_json
-    from pimann.train import META_FILE, load_model
 
     model, layout, stats, meta = load_model(model_dir)
     standing = StandingPose.nominal()

@@ -71,7 +71,7 @@ def sustainment(models_dir: Path, collection: Path, params: Params, seconds: flo
     """One row per model seed and held-out clip of `collection` (the features stage's split)
     in motion at its middle frame."""
     from pimann.generate import RolloutSpec, generate_batch
-    from pimann.train import load_model
+    from pimann.model_files import load_model
 
     starts = [(name, *clip_start(t, seconds)) for name, t in held_out_clips(collection, params)]
     starts = [start for start in starts if start[1] in MOVING]

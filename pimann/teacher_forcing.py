@@ -48,7 +48,7 @@ def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
 
 def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
     """One row per model seed, split (train subset / test) and motion class."""
-    from pimann.train import load_model
+    from pimann.model_files import load_model
 
     rows = []
     cache: dict[str, tuple] = {}

@@ -8,10 +8,8 @@ would give alone whatever group it trains in. The dropout and order seeds are fi
 epoch, so a run resumed from its per-epoch checkpoint continues exactly as an uninterrupted
 one.
 
-L_D is the MSE on the normalised outputs; L_B (`PhysicsInformedLoss`) is taken in physical
-units on the denormalised prediction: the base twist at step i (the output window's offset
-0), the joint velocities, and the configuration (base position, rpy, joints) predicted, or
-the ground truth's with `train.pi_configuration: ground_truth`.
+The loss is `pimann.training_loss`, the per-epoch schedule, order and seeds
+`pimann.epochs`, the model folders `pimann.model_files`.
 
 Optimiser as in the authors' code: AdamW, lr 1e-4 and weight decay 0.0025 / sqrt(batches
 per epoch x Te), both annealed per epoch by cosine warm restarts (Te = 10, Tmult = 2). The
@@ -28,31 +26,26 @@ import json
 import logging
 import math
 import os
-import pickle
 import shutil
-import warnings
 from pathlib import Path
 
 import numpy as np
 import torch
 
 from pimann.atomic import atomic_path
-from pimann.errors import PimannError, about
-from pimann.features import FeatureLayout, Normalisation, read_dataset
+from pimann.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
+from pimann.errors import PimannError
+from pimann.features import read_dataset
 from pimann.mann import MANN
+from pimann.model_files import save_model
 from pimann.parallel import cpu_workers, pool_map
-from pimann.params import ModelParams, Params, as_dict
-from pimann.physics_loss import PhysicsInformedLoss
+from pimann.params import Params, as_dict
 from pimann.progress import Progress
-from pimann.robot import load_robot
+from pimann.training_loss import TrainingLoss
 
 log = logging.getLogger(__name__)
 
-MODEL_FILE = "model.pt"
-META_FILE = "meta.json"
 CHECKPOINT_FILE = "checkpoint.pt"
-STAT_NAMES = ("x_mean", "x_std", "y_mean", "y_std")
-MODEL_KEYS = ("state_dict", "input_dim", "output_dim", "model_params", "layout", "stats")
 LOSS_COLUMNS = ("train_loss", "train_mse", "train_pi", "test_loss", "test_mse", "test_pi")
 
 
@@ -65,136 +58,9 @@ def pick_device(setting: str = "auto") -> torch.device:
     return torch.device(setting)
 
 
-def schedule_factor(epoch: int, period: int, mult: int) -> float:
-    """Cosine warm restarts: 0.5 (1 + cos(pi t / T)) at epoch t of the current cycle of T."""
-    if period < 1 or mult < 1:
-        raise PimannError(None, "train.restart_period and restart_mult must be >= 1")
-    t, length = epoch, period
-    while t >= length:
-        t -= length
-        length *= mult
-    return 0.5 * (1.0 + math.cos(math.pi * t / length))
-
-
-def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
-    """The member's sample order in one epoch: a function of (seed, epoch) only."""
-    return np.random.default_rng([seed, epoch]).permutation(n)
-
-
 def seed_groups(seeds: list[int], workers: int) -> list[list[int]]:
     """The seeds split into `workers` contiguous groups of near-equal size, one per process."""
     return [list(map(int, group)) for group in np.array_split(np.array(seeds), workers)]
-
-
-def _dropout_seed(seed: int, epoch: int) -> int:
-    """A member's dropout seed in one epoch (so resuming needs no saved RNG state)."""
-    return int(np.random.SeedSequence([seed, epoch, 0x5EED]).generate_state(1)[0])
-
-
-class InputNoise:
-    """train.input_noise: Gaussian noise on the inputs a rollout feeds back from its own
-    predictions (FeatureLayout.fed_back_columns), so the network learns to lead a state that
-    has drifted off the data back to it. Each member draws from its own seed and epoch."""
-
-    def __init__(self, std: float, columns: np.ndarray, seeds: list[int], device: torch.device):
-        self.std, self.seeds, self.device = std, seeds, device
-        self.columns = torch.as_tensor(columns, dtype=torch.float32, device=device)
-        self.generators: list[torch.Generator] = []
-
-    def start_epoch(self, epoch: int) -> None:
-        self.generators = [
-            torch.Generator(self.device).manual_seed(_dropout_seed(seed, epoch) ^ 0x401)
-            for seed in self.seeds
-        ]
-
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
-        """x (E, B, in) with noise on the fed-back columns; x itself where std is 0."""
-        if self.std == 0.0:
-            return x
-        noise = torch.stack(
-            [
-                torch.randn(x.shape[1:], generator=g, device=self.device, dtype=x.dtype)
-                for g in self.generators
-            ]
-        )
-        return x + self.std * noise * self.columns
-
-
-# per `train.pi_gradient`: the predictions L_B's gradient does not move
-_HELD = {
-    "both": (),
-    "joints": ("base_linear_velocity", "base_angular_velocity"),
-    "base": ("base_position", "base_rpy", "joints", "joint_velocities"),
-}
-
-
-class TrainingLoss(torch.nn.Module):
-    """Per-member L_D (normalised MSE) and L_B (physical units) of an ensemble's prediction."""
-
-    def __init__(
-        self,
-        layout: FeatureLayout,
-        stats: Normalisation,
-        pi_configuration: str,
-        device: torch.device,
-        pi_support: str = "lower_sole",
-        pi_gradient: str = "both",
-    ):
-        super().__init__()
-        self.layout, self.pi_configuration = layout, pi_configuration
-        self.pi_support, self.pi_gradient = pi_support, pi_gradient
-        self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
-        self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
-        self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
-        self.to(device)
-
-    def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
-        """Denormalised quantities of y (..., out) that L_B needs, by argument name."""
-        physical = y * self.y_std + self.y_mean
-        s = self.layout.y_slices
-        now = self.layout.current_output
-
-        def at_now(block: str) -> torch.Tensor:
-            return physical[..., s[block]].unflatten(-1, (-1, 3))[..., now, :]
-
-        return {
-            "base_position": physical[..., s["base_position"]],
-            "base_rpy": physical[..., s["base_rpy"]],
-            "joints": physical[..., s["joints"]],
-            "base_linear_velocity": at_now("base_linear_future"),
-            "base_angular_velocity": at_now("base_angular_future"),
-            "joint_velocities": physical[..., s["joint_velocities"]],
-        }
-
-    def forward(
-        self,
-        prediction: torch.Tensor,
-        target: torch.Tensor,
-        with_pi: bool = True,
-        contacts: torch.Tensor | None = None,
-        pi_prediction: torch.Tensor | None = None,
-    ) -> tuple[torch.Tensor, torch.Tensor]:
-        """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False.
-
-        `contacts` (E, B, 2): the data's feet in contact, needed with pi_support data_contacts.
-        `pi_prediction`: the prediction L_B is taken on, when not `prediction` (train.pi_dropout
-        false: the same inputs without dropout).
-        """
-        mse = (prediction - target).square().mean(dim=(-2, -1))
-        if not with_pi:
-            return mse, torch.zeros_like(mse)
-        terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
-        if self.pi_support == "data_contacts":
-            if contacts is None:
-                raise ValueError("pi_support data_contacts needs the samples' contacts")
-            terms["support"] = contacts
-        if self.pi_configuration == "ground_truth":
-            truth = self.pi_terms(target)
-            for name in ("base_position", "base_rpy", "joints"):
-                terms[name] = truth[name]
-        for name in _HELD[self.pi_gradient]:
-            terms[name] = terms[name].detach()
-        return mse, self.physics(**terms).mean(-1)
 
 
 @dataclasses.dataclass
@@ -445,7 +311,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         for group in optimizer.param_groups:
             group["lr"] = config.learning_rate * factor
             group["weight_decay"] = weight_decay * factor
-        model.seed_dropout([_dropout_seed(seed, epoch) for seed in seeds])
+        model.seed_dropout([epoch_seed(seed, epoch, "dropout") for seed in seeds])
         noise.start_epoch(epoch)
         order = torch.as_tensor(
             np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
@@ -516,118 +382,3 @@ def write_loss_csv(path: Path, history: list[dict]) -> None:
         writer = csv.DictWriter(file, fieldnames=["epoch", *LOSS_COLUMNS, "lr"])
         writer.writeheader()
         writer.writerows(history)
-
-
-def save_model(
-    directory: Path, model: MANN, layout: FeatureLayout, stats: Normalisation, meta: dict
-) -> None:
-    """A single model's folder: model.pt (weights, sizes, layout, statistics) and meta.json."""
-    if model.ensemble != 1:
-        raise ValueError("save one member at a time (MANN.member)")
-    directory.mkdir(parents=True, exist_ok=True)
-    model_params = meta["params"]["model"]
-    blob = {
-        "state_dict": {k: v.detach().cpu() for k, v in model.state_dict().items()},
-        "input_dim": model.input_dim,
-        "output_dim": model.output_dim,
-        "model_params": model_params,
-        "layout": layout.to_json(),
-        "stats": {
-            name: torch.as_tensor(getattr(stats, name), dtype=torch.float64) for name in STAT_NAMES
-        },
-    }
-    torch.save(blob, directory / MODEL_FILE)
-    (directory / META_FILE).write_text(json.dumps(meta, indent=2) + "\n")
-
-
-def _read_checkpoint(path: Path, device: torch.device | str) -> dict:
-    """model.pt's dictionary; a file torch cannot read (empty, cut short, text, another
-    pickle) or another dictionary named."""
-    try:
-        with warnings.catch_warnings():  # torch warns about a pickle before it refuses it
-            warnings.simplefilter("ignore")
-            blob = torch.load(path, map_location=device, weights_only=True)
-    except OSError as error:
-        raise PimannError(path, f"cannot read the model ({error.strerror})") from None
-    except EOFError:
-        raise PimannError(path, "not a PyTorch checkpoint: empty or cut short") from None
-    except (RuntimeError, KeyError, ValueError, pickle.UnpicklingError) as error:
-        reason = str(error).split(". ")[0]  # torch's own messages run to paragraphs
-        raise PimannError(
-            path, f"not a PyTorch checkpoint ({type(error).__name__}: {reason})"
-        ) from None
-    if not isinstance(blob, dict):
-        raise PimannError(path, f"holds a {type(blob).__name__}, not a trained model")
-    missing = [key for key in MODEL_KEYS if key not in blob]
-    if missing:
-        raise PimannError(path, f"not a trained model (lacks {missing})")
-    return blob
-
-
-def _read_meta(path: Path) -> dict:
-    """meta.json: a JSON object with the model's integer seed."""
-    try:
-        meta = json.loads(path.read_text())
-    except OSError as error:
-        raise PimannError(path, f"cannot read the model's metadata ({error.strerror})") from None
-    except ValueError as error:  # not JSON, or not text
-        raise PimannError(path, f"not JSON ({error})") from None
-    if not isinstance(meta, dict) or type(meta.get("seed")) is not int:
-        raise PimannError(path, "not a model's metadata (no integer 'seed')")
-    return meta
-
-
-def _check_tensor(path: Path, name: str, value: object, shape: tuple[int, ...]) -> None:
-    """`value` is a finite tensor of `shape`; else named."""
-    if not isinstance(value, torch.Tensor) or tuple(value.shape) != shape:
-        found = tuple(value.shape) if isinstance(value, torch.Tensor) else type(value).__name__
-        raise PimannError(path, f"{name} is {found}, the model needs a tensor of shape {shape}")
-    if not torch.isfinite(value).all():
-        raise PimannError(path, f"{name} holds NaN or infinite values")
-
-
-def load_model(
-    directory: str | Path, device: torch.device | str = "cpu"
-) -> tuple[MANN, FeatureLayout, Normalisation, dict]:
-    """(model in eval mode, layout, normalisation, meta) of a folder written by training.
-
-    A folder of anything else (a file cut short, another network, NaN weights) is named.
-    """
-    directory = Path(directory)
-    path = directory / MODEL_FILE
-    if not path.is_file():
-        raise PimannError(path, "no trained model here")
-    blob = _read_checkpoint(path, device)
-    meta = _read_meta(directory / META_FILE)
-    with about(path, "layout"):
-        layout = FeatureLayout.from_json(blob["layout"])
-    dims = (blob["input_dim"], blob["output_dim"])
-    if dims != (layout.input_dim, layout.output_dim):
-        raise PimannError(
-            path, f"input_dim, output_dim {dims} do not fit the layout's "
-            f"{(layout.input_dim, layout.output_dim)}"
-        )  # fmt: skip
-    try:
-        model_params = ModelParams(**blob["model_params"])
-        model = MANN(*dims, model_params, ensemble=1, seeds=[meta["seed"]])
-    except (TypeError, ValueError, RuntimeError) as error:
-        raise PimannError(path, f"model_params: {error}") from None
-    weights, expected = blob["state_dict"], model.state_dict()
-    if not isinstance(weights, dict):
-        raise PimannError(path, f"state_dict is a {type(weights).__name__}, not a dictionary")
-    missing, unexpected = expected.keys() - weights.keys(), weights.keys() - expected.keys()
-    if missing or unexpected:
-        parts = [f"lacks {sorted(missing)}"] * bool(missing)
-        parts += [f"has unexpected {sorted(unexpected)}"] * bool(unexpected)
-        raise PimannError(path, f"state_dict does not fit model_params: {', '.join(parts)}")
-    for name, tensor in expected.items():
-        _check_tensor(path, f"state_dict[{name!r}]", weights[name], tuple(tensor.shape))
-    model.load_state_dict(weights)
-    model.to(device).eval()
-    stats = blob["stats"] if isinstance(blob["stats"], dict) else {}
-    for name, size in zip(STAT_NAMES, (dims[0], dims[0], dims[1], dims[1]), strict=True):
-        _check_tensor(path, f"stats[{name!r}]", stats.get(name), (size,))
-    normalisation = Normalisation(*(stats[n].cpu().numpy() for n in STAT_NAMES))
-    if (normalisation.x_std <= 0).any() or (normalisation.y_std <= 0).any():
-        raise PimannError(path, "stats x_std or y_std hold values <= 0")
-    return model, layout, normalisation, meta

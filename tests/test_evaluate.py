@@ -83,8 +83,8 @@ def test_results_record_provenance(params, tmp_path):
 def _tiny_models(root, weight: float, variant: str, seeds):
     from pimann.features import FeatureLayout, Normalisation
     from pimann.mann import MANN
+    from pimann.model_files import save_model
     from pimann.params import ModelParams
-    from pimann.train import save_model
 
     layout = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, variant)
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")

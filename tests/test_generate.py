@@ -343,7 +343,7 @@ def test_trained_mann_steps_with_switching_contacts(robot, params, one_thread):
 
 
 def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, tmp_path):
-    from pimann.train import save_model
+    from pimann.model_files import save_model
 
     torch.manual_seed(0)
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")

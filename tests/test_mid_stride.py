@@ -12,9 +12,9 @@ from pimann.features import build_dataset, write_dataset
 from pimann.generate import RolloutSpec, generate_batch
 from pimann.mann import MANN
 from pimann.mid_stride import achieved, clip_start, sustainment
+from pimann.model_files import load_model, save_model
 from pimann.params import ModelParams, MotionSegment, load_params
 from pimann.standing import StandingPose
-from pimann.train import load_model, save_model
 from pimann.trajectory import write_collection
 from tests.test_features import RATE, synthetic_clip, synthetic_collection
 

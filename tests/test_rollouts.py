@@ -119,7 +119,14 @@ def test_scripts_round_trip_through_json():
     assert read_script(trajectory) == script
 
 
-GENERATION = ("torch", "pimann.generate", "pimann.batch_generate", "pimann.train", "pimann.mann")
+GENERATION = (
+    "torch",
+    "pimann.generate",
+    "pimann.batch_generate",
+    "pimann.train",
+    "pimann.model_files",
+    "pimann.mann",
+)
 
 
 @pytest.mark.parametrize(

@@ -10,9 +10,9 @@ import torch
 
 from pimann.features import build_dataset, write_dataset
 from pimann.mann import MANN
+from pimann.model_files import save_model
 from pimann.params import ModelParams, load_params
 from pimann.teacher_forcing import _slope, class_response
-from pimann.train import save_model
 from pimann.trajectory import write_collection
 from tests.test_features import synthetic_collection
 

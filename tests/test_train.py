@@ -15,19 +15,14 @@ import pytest
 import torch
 from test_features import break_features, synthetic_collection
 
+from pimann.epochs import InputNoise, epoch_order, schedule_factor
 from pimann.errors import PimannError
 from pimann.features import Normalisation, build_dataset, window_layout, write_dataset
 from pimann.mann import MANN
+from pimann.model_files import load_model, save_model
 from pimann.params import ModelParams, load_params
-from pimann.train import (
-    InputNoise,
-    TrainingLoss,
-    epoch_order,
-    load_model,
-    save_model,
-    schedule_factor,
-    train_models,
-)
+from pimann.train import train_models
+from pimann.training_loss import TrainingLoss
 
 SMALL_MODEL = ModelParams(
     n_experts=2, gating_hidden=8, gating_layers=3, prediction_hidden=32, prediction_layers=3,

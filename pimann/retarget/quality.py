@@ -9,16 +9,13 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pimann.contacts import trajectory_configurations
+from pimann.contacts import foot_kinematics, trajectory_configurations
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 from pimann.retarget.targets import segment_targets
 from pimann.robot import (
     JOINT_NAMES,
-    LEFT_SOLE,
-    RIGHT_SOLE,
     SEGMENTS,
-    SOLE_CORNERS,
     corner_offsets,
     load_robot,
 )
@@ -45,24 +42,20 @@ def frame_measures(
     model, data = robot.model, robot.model.createData()
     n = len(trajectory)
     segment_frames = [robot.frame_id(f"data_{s}") for s in SEGMENTS]
-    sole_frames = [robot.frame_id(LEFT_SOLE), robot.frame_id(RIGHT_SOLE)]
     knees = [model.getJointId(j) for j in ("l_knee", "r_knee")]
     ankles = [model.getJointId(j) for j in ("l_ankle_pitch", "r_ankle_pitch")]
     rotations = np.empty((n, len(SEGMENTS), 3, 3))
-    soles = np.empty((n, 2, 3))
-    corners = np.empty((n, 2, len(SOLE_CORNERS), 3))
     shanks = np.empty((n, 2, 2, 3))
     configurations = trajectory_configurations(robot, trajectory)
     for t in range(n):
-        q = configurations[t]
-        pin.framesForwardKinematics(model, data, q)
+        pin.framesForwardKinematics(model, data, configurations[t])
         for k, frame in enumerate(segment_frames):
             rotations[t, k] = data.oMf[frame].rotation
-        for k, frame in enumerate(sole_frames):
-            placement = data.oMf[frame]
-            soles[t, k] = placement.translation
-            corners[t, k] = placement.translation + corner_offsets(placement.rotation)
+        for k in range(2):
             shanks[t, k] = data.oMi[knees[k]].translation, data.oMi[ankles[k]].translation
+    feet = foot_kinematics(robot, configurations)
+    soles = feet.positions  # (T, 2, 3)
+    corners = soles[:, :, None] + corner_offsets(feet.rotations)  # (T, 2, C, 3)
     targets = segment_targets(motion, params)
     relative = np.swapaxes(rotations, -1, -2) @ targets
     cosine = np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)

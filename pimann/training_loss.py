@@ -1,0 +1,91 @@
+"""The training loss L = L_D + w L_B per ensemble member (SPEC 5, 6; Eq. overall_loss).
+
+L_D is the MSE on the normalised outputs; L_B (`PhysicsInformedLoss`) is taken in physical
+units on the denormalised prediction: the base twist at step i (the output window's offset
+0), the joint velocities, and the configuration (base position, rpy, joints) predicted, or
+the ground truth's with `train.pi_configuration: ground_truth`.
+"""
+
+from __future__ import annotations
+
+import torch
+
+from pimann.features import FeatureLayout, Normalisation
+from pimann.physics_loss import PhysicsInformedLoss
+from pimann.robot import load_robot
+
+# per `train.pi_gradient`: the predictions L_B's gradient does not move
+_HELD = {
+    "both": (),
+    "joints": ("base_linear_velocity", "base_angular_velocity"),
+    "base": ("base_position", "base_rpy", "joints", "joint_velocities"),
+}
+
+
+class TrainingLoss(torch.nn.Module):
+    """Per-member L_D (normalised MSE) and L_B (physical units) of an ensemble's prediction."""
+
+    def __init__(
+        self,
+        layout: FeatureLayout,
+        stats: Normalisation,
+        pi_configuration: str,
+        device: torch.device,
+        pi_support: str = "lower_sole",
+        pi_gradient: str = "both",
+    ):
+        super().__init__()
+        self.layout, self.pi_configuration = layout, pi_configuration
+        self.pi_support, self.pi_gradient = pi_support, pi_gradient
+        self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
+        self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
+        self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
+        self.to(device)
+
+    def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
+        """Denormalised quantities of y (..., out) that L_B needs, by argument name."""
+        physical = y * self.y_std + self.y_mean
+        s = self.layout.y_slices
+        now = self.layout.current_output
+
+        def at_now(block: str) -> torch.Tensor:
+            return physical[..., s[block]].unflatten(-1, (-1, 3))[..., now, :]
+
+        return {
+            "base_position": physical[..., s["base_position"]],
+            "base_rpy": physical[..., s["base_rpy"]],
+            "joints": physical[..., s["joints"]],
+            "base_linear_velocity": at_now("base_linear_future"),
+            "base_angular_velocity": at_now("base_angular_future"),
+            "joint_velocities": physical[..., s["joint_velocities"]],
+        }
+
+    def forward(
+        self,
+        prediction: torch.Tensor,
+        target: torch.Tensor,
+        with_pi: bool = True,
+        contacts: torch.Tensor | None = None,
+        pi_prediction: torch.Tensor | None = None,
+    ) -> tuple[torch.Tensor, torch.Tensor]:
+        """(mse (E,), pi (E,)) averaged over the batch; pi is 0 when `with_pi` is False.
+
+        `contacts` (E, B, 2): the data's feet in contact, needed with pi_support data_contacts.
+        `pi_prediction`: the prediction L_B is taken on, when not `prediction` (train.pi_dropout
+        false: the same inputs without dropout).
+        """
+        mse = (prediction - target).square().mean(dim=(-2, -1))
+        if not with_pi:
+            return mse, torch.zeros_like(mse)
+        terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
+        if self.pi_support == "data_contacts":
+            if contacts is None:
+                raise ValueError("pi_support data_contacts needs the samples' contacts")
+            terms["support"] = contacts
+        if self.pi_configuration == "ground_truth":
+            truth = self.pi_terms(target)
+            for name in ("base_position", "base_rpy", "joints"):
+                terms[name] = truth[name]
+        for name in _HELD[self.pi_gradient]:
+            terms[name] = terms[name].detach()
+        return mse, self.physics(**terms).mean(-1)
