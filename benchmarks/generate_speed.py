@@ -30,7 +30,7 @@ import torch
 
 from pimann.benchmark_clips import benchmark_scripts
 from pimann.command_script import scenario_steps
-from pimann.features import Normalisation, window_layout
+from pimann.feature_layout import Normalisation, window_layout
 from pimann.generate import SECTIONS, RolloutSpec, generate_batch, generate_rollout
 from pimann.mann import MANN
 from pimann.params import MotionSegment, StandSegment, load_params

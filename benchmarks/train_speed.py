@@ -15,7 +15,7 @@ import time
 import numpy as np
 import torch
 
-from pimann.features import Normalisation, window_layout
+from pimann.feature_layout import Normalisation, window_layout
 from pimann.mann import MANN
 from pimann.params import load_params
 from pimann.train import pick_device

@@ -23,7 +23,7 @@ import torch
 
 from pimann.contacts import SchmittTrigger
 from pimann.errors import PimannError
-from pimann.features import FeatureLayout, Normalisation
+from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.leg_odometry import Odometry
 from pimann.mann import MANN
 from pimann.params import EvaluateParams, RolloutParams

@@ -77,7 +77,7 @@ from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the test
 )
 from pimann.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
 from pimann.errors import PimannError
-from pimann.features import FeatureLayout, Normalisation
+from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.params import (
     DEFAULT_PARAMS,
     EvaluateParams,

@@ -13,7 +13,7 @@ from pathlib import Path
 import torch
 
 from pimann.errors import PimannError, about
-from pimann.features import FeatureLayout, Normalisation
+from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.mann import MANN
 from pimann.params import ModelParams
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import torch
 
-from pimann.features import FeatureLayout, Normalisation
+from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.physics_loss import PhysicsInformedLoss
 from pimann.robot import load_robot
 

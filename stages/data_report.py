@@ -10,7 +10,8 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.data_report import data_report, write_report
+from pimann.data_report import data_report
+from pimann.data_report_output import write_report
 from pimann.logs import parse_stage_args
 from pimann.parallel import cpu_workers
 from pimann.params import load_params

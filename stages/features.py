@@ -10,7 +10,8 @@ import logging
 import sys
 from pathlib import Path
 
-from pimann.features import VARIANTS, build_dataset, write_dataset
+from pimann.feature_layout import VARIANTS
+from pimann.features import build_dataset, write_dataset
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.stage import stage_entry

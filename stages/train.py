@@ -17,7 +17,7 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.features import VARIANTS
+from pimann.feature_layout import VARIANTS
 from pimann.logs import parse_stage_args
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT

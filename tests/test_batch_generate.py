@@ -16,7 +16,8 @@ from test_generate import IDENTITY, LAYOUT, GaitModel
 
 from pimann.batch_generate import BatchGenerator, NumpyMANN
 from pimann.contacts import FEET
-from pimann.features import Normalisation, clip_features
+from pimann.feature_layout import Normalisation
+from pimann.features import clip_features
 from pimann.generate import RolloutSpec, generate_batch, generate_rollout
 from pimann.leg_odometry import SoleFrames
 from pimann.mann import MANN

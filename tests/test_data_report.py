@@ -12,6 +12,7 @@ from conftest import EVALUATE_PARAMS
 from scipy.spatial.transform import Rotation
 
 from pimann import data_report as dr
+from pimann import data_report_output as dro
 from pimann import motion_classes as mc
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
@@ -248,10 +249,10 @@ def test_report_per_source_with_mirrors_and_outputs(params, tmp_path):
     assert sources["total"]["label_minutes"]["unlabelled"] == pytest.approx(0.1)
     assert report["profile"] == params.profile
     assert "bandai_namco" in report["params"]["data"]["sources"]
-    table = dr.report_table(report)
+    table = dro.report_table(report)
     assert "| bandai_namco |" in table and "authors" in table
     paths = [tmp_path / "out" / n for n in ("report.json", "report.md", "report.png")]
-    dr.write_report(report, *paths, params.figures)
+    dro.write_report(report, *paths, params.figures)
     assert json.loads(paths[0].read_text())["sources"]["total"]["frames"] == 600
     assert paths[1].read_text() == table
     assert paths[2].stat().st_size > 1000

@@ -81,7 +81,7 @@ def test_results_record_provenance(params, tmp_path):
 
 
 def _tiny_models(root, weight: float, variant: str, seeds):
-    from pimann.features import FeatureLayout, Normalisation
+    from pimann.feature_layout import FeatureLayout, Normalisation
     from pimann.mann import MANN
     from pimann.model_files import save_model
     from pimann.params import ModelParams

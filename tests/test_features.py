@@ -13,15 +13,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pimann.errors import PimannError
-from pimann.features import (
-    FeatureLayout,
-    build_dataset,
-    clip_features,
-    read_dataset,
-    split_sources,
-    window_layout,
-    write_dataset,
-)
+from pimann.feature_layout import FeatureLayout, window_layout
+from pimann.features import build_dataset, clip_features, read_dataset, split_sources, write_dataset
 from pimann.params import load_params
 from pimann.robot import N_JOINTS, STANDING_JOINTS
 from pimann.trajectory import Trajectory, write_trajectory

@@ -20,7 +20,8 @@ from torch import nn
 
 from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configurations
 from pimann.errors import PimannError
-from pimann.features import FeatureLayout, Normalisation, clip_features, matrix_to_rpy
+from pimann.feature_layout import FeatureLayout, Normalisation
+from pimann.features import clip_features, matrix_to_rpy
 from pimann.generate import (
     _interpolation,
     generate,

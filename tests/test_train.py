@@ -17,7 +17,8 @@ from test_features import break_features, synthetic_collection
 
 from pimann.epochs import InputNoise, epoch_order, schedule_factor
 from pimann.errors import PimannError
-from pimann.features import Normalisation, build_dataset, window_layout, write_dataset
+from pimann.feature_layout import Normalisation, window_layout
+from pimann.features import build_dataset, write_dataset
 from pimann.mann import MANN
 from pimann.model_files import load_model, save_model
 from pimann.params import ModelParams, load_params
