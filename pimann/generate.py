@@ -48,7 +48,7 @@ Batches. These rules run in pimann.batch_generate, vectorised over rollouts of o
 network call per step for every walking row, vectorised leg odometry (pimann.leg_odometry),
 contacts and steering; each row its own script, stops and restarts). `generate_rollout` is a
 batch of one, so a rollout alone equals its row of any batch (to rounding: on the CPU a MANN
-runs in numpy (`batch_generate.NumpyMANN`), and BLAS rounds a row differently at other batch
+runs in numpy (`rollout_network.NumpyMANN`), and BLAS rounds a row differently at other batch
 sizes; 1e-16 in float64). The rollout stage (pimann.rollouts.run_rollouts)
 generates one batch per seed (`generate_files`). `python -m benchmarks.generate_speed`
 measures it (full-size MANN, 1 thread): a 10-s rollout alone 0.15-0.16 s, 0.03-0.05 s

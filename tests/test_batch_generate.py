@@ -14,7 +14,7 @@ import pytest
 import torch
 from test_generate import IDENTITY, LAYOUT, GaitModel
 
-from pimann.batch_generate import BatchGenerator, NumpyMANN
+from pimann.batch_generate import BatchGenerator
 from pimann.contacts import FEET
 from pimann.feature_layout import Normalisation
 from pimann.features import clip_features
@@ -22,6 +22,7 @@ from pimann.generate import RolloutSpec, generate_batch, generate_rollout
 from pimann.leg_odometry import SoleFrames
 from pimann.mann import MANN
 from pimann.params import ModelParams, MotionSegment, StandSegment
+from pimann.rollout_network import NumpyMANN
 from pimann.standing import StandingPose
 
 M, S = MotionSegment, StandSegment
