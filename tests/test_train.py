@@ -326,7 +326,9 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
     off = dataclasses.replace(
         params, train=dataclasses.replace(params.train, pi_dropout=False, epochs=1)
     )
-    on = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    on = dataclasses.replace(
+        params, train=dataclasses.replace(params.train, pi_dropout=True, epochs=1)
+    )
     for name, run in (("off", off), ("off_again", off), ("on", on)):
         train_models(dataset_path, tmp_path / name, 10.0, [0], run, "cpu")
     a, b = _weights(tmp_path / "off" / "0"), _weights(tmp_path / "off_again" / "0")
