@@ -15,7 +15,7 @@ import pytest
 import torch
 from test_features import break_features, synthetic_collection
 
-from pimann.epochs import InputNoise, epoch_order, schedule_factor
+from pimann.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
 from pimann.errors import PimannError
 from pimann.feature_layout import Normalisation, window_layout
 from pimann.features import build_dataset, write_dataset
@@ -59,6 +59,11 @@ def test_schedule_and_order():
     assert np.array_equal(epoch_order(3, 2, 50), epoch_order(3, 2, 50))
     assert not np.array_equal(epoch_order(3, 2, 50), epoch_order(4, 2, 50))
     assert sorted(epoch_order(3, 2, 50)) == list(range(50))
+    # one seed per (member, epoch, purpose): dropout and input noise never share a stream
+    seeds = {
+        epoch_seed(s, e, p) for s in (0, 1) for e in (0, 1) for p in ("dropout", "input_noise")
+    }
+    assert len(seeds) == 8 and epoch_seed(1, 1, "dropout") == epoch_seed(1, 1, "dropout")
 
 
 def test_training_is_deterministic_resumes_exactly_and_learns(tmp_path, params, dataset_path):
