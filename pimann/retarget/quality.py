@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pimann.contacts import foot_kinematics, trajectory_configurations
+from pimann.contacts import FEET, trajectory_configurations
 from pimann.mocap.human_motion import HumanMotion
 from pimann.params import RetargetParams
 from pimann.retarget.targets import segment_targets
@@ -46,16 +46,18 @@ def frame_measures(
     ankles = [model.getJointId(j) for j in ("l_ankle_pitch", "r_ankle_pitch")]
     rotations = np.empty((n, len(SEGMENTS), 3, 3))
     shanks = np.empty((n, 2, 2, 3))
+    sole_frames = [robot.frame_id(name) for name in FEET]
+    soles, sole_rotations = np.empty((n, 2, 3)), np.empty((n, 2, 3, 3))
     configurations = trajectory_configurations(robot, trajectory)
-    for t in range(n):
+    for t in range(n):  # one pass per frame: every frame placement the measures read
         pin.framesForwardKinematics(model, data, configurations[t])
         for k, frame in enumerate(segment_frames):
             rotations[t, k] = data.oMf[frame].rotation
         for k in range(2):
             shanks[t, k] = data.oMi[knees[k]].translation, data.oMi[ankles[k]].translation
-    feet = foot_kinematics(robot, configurations)
-    soles = feet.positions  # (T, 2, 3)
-    corners = soles[:, :, None] + corner_offsets(feet.rotations)  # (T, 2, C, 3)
+            sole = data.oMf[sole_frames[k]]
+            soles[t, k], sole_rotations[t, k] = sole.translation, sole.rotation
+    corners = soles[:, :, None] + corner_offsets(sole_rotations)  # (T, 2, C, 3)
     targets = segment_targets(motion, params)
     relative = np.swapaxes(rotations, -1, -2) @ targets
     cosine = np.clip((np.trace(relative, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
