@@ -24,6 +24,7 @@ import torch
 from pimann.contacts import SchmittTrigger
 from pimann.errors import PimannError
 from pimann.feature_layout import FeatureLayout, Normalisation
+from pimann.future_window import command_weights, next_future_matrix
 from pimann.leg_odometry import Odometry
 from pimann.params import EvaluateParams, RolloutParams
 from pimann.robot import Robot
@@ -33,19 +34,6 @@ from pimann.standing import StandingPose
 from pimann.steering import exp_so3, goal_from_command, roll_pitch, rotation_rpy, steer
 
 SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
-
-
-def _interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:
-    """Matrix M with M @ f(knots) = f(targets), linear between knots, clamped at the ends."""
-    matrix = np.zeros((len(targets), len(knots)))
-    for row, target in enumerate(np.clip(targets, knots[0], knots[-1])):
-        upper = min(int(np.searchsorted(knots, target, side="right")), len(knots) - 1)
-        lower = max(upper - 1, 0)
-        span = knots[upper] - knots[lower]
-        fraction = 0.0 if span == 0 else (target - knots[lower]) / span
-        matrix[row, lower] += 1.0 - fraction
-        matrix[row, upper] += fraction
-    return matrix
 
 
 def _planar(yaw: np.ndarray, vector: np.ndarray) -> np.ndarray:
@@ -91,13 +79,9 @@ class BatchGenerator:
         self.past_offsets = np.asarray(layout.past_input_offsets(), dtype=int)
         if not np.all(np.diff(in_offsets) > 0):
             raise PimannError(None, "the input window's offsets must increase")
-        # velocity at step i + o (o > 0) is the previous prediction's sample at offset o + 1
-        future_offsets = in_offsets[len(self.past_offsets) :]
-        self.future_matrix = _interpolation(future_offsets + 1.0, out_offsets)
+        self.future_matrix = next_future_matrix(layout)
         self.horizon = out_offsets.max() / layout.rate_hz
-        span = max(out_offsets.max(), 1.0)
-        self.weights = (np.clip(out_offsets / span, 0, 1) ** params.command_blend_tau)[:, None]
-        self.weights[out_offsets <= 0] = 0.0
+        self.weights = command_weights(layout.output_offsets, params.command_blend_tau)[:, None]
         self.keep = 1.0 - self.weights
         rpy = np.array([*standing.roll_pitch, 0.0])
         self.standing_rpy = rpy * ([0.0, 0.0, 1.0] if self.projected else 1.0)

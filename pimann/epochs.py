@@ -32,12 +32,12 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
 
 
 # one random stream per purpose, so input noise and dropout masks never share draws
-_STREAMS = {"dropout": 0x5EED, "input_noise": 0x401}
+_STREAMS = {"dropout": 0x5EED, "input_noise": 0x401, "rollout_states": 0x2011}
 
 
 def epoch_seed(seed: int, epoch: int, purpose: str) -> int:
-    """A member's seed for one epoch and one purpose (`dropout` or `input_noise`): a function
-    of (seed, epoch) only, so a resumed run needs no saved RNG state."""
+    """A member's seed for one epoch and one purpose (a key of `_STREAMS`): a function of
+    (seed, epoch) only, so a resumed run needs no saved RNG state."""
     return int(np.random.SeedSequence([seed, epoch, _STREAMS[purpose]]).generate_state(1)[0])
 
 

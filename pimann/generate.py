@@ -70,11 +70,7 @@ import torch
 from scipy.spatial.transform import Rotation
 from threadpoolctl import ThreadpoolController
 
-from pimann.batch_generate import (  # noqa: F401  (_interpolation: for the tests)
-    SECTIONS,
-    BatchGenerator,
-    _interpolation,
-)
+from pimann.batch_generate import BatchGenerator
 from pimann.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
 from pimann.errors import PimannError
 from pimann.feature_layout import FeatureLayout, Normalisation

@@ -145,6 +145,8 @@ class TrainParams:
     pi_gradient: Literal["both", "joints", "base"]  # which predictions L_B's gradient moves
     pi_dropout: bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
     input_noise: float  # std (normalised units) of noise on the fed-back inputs; 0: the paper
+    rollout_states: float  # share of samples with own-rollout inputs (pimann.rollout_states)
+    rollout_steps: int  # frames of each own-rollout piece
     max_train_samples: int | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]

@@ -77,6 +77,8 @@ RANGES: dict[str, Bound] = {
     "model.dropout": Bound(0.0, 1.0, closed_high=False),
     "train.pi_weights.*": NON_NEGATIVE,
     "train.input_noise": NON_NEGATIVE,
+    "train.rollout_states": FRACTION,
+    "train.rollout_steps": AT_LEAST_ONE,
     "train.seeds.*": NON_NEGATIVE,
     "train.epochs": AT_LEAST_ONE,
     "train.batch_size": AT_LEAST_ONE,

@@ -41,6 +41,7 @@ from pimann.model_files import save_model
 from pimann.parallel import cpu_workers, pool_map
 from pimann.params import Params, as_dict
 from pimann.progress import Progress
+from pimann.rollout_states import OwnRollouts, RolloutStates
 from pimann.training_loss import TrainingLoss
 
 log = logging.getLogger(__name__)
@@ -95,12 +96,14 @@ def _evaluate(
     batch: int,
     with_pi: bool,
 ) -> tuple[torch.Tensor, torch.Tensor]:
-    """Test-set (mse, pi) per member, averaged over samples, dropout off."""
+    """Test-set (mse, pi) per member, averaged over samples, dropout off; x (N, in) or each
+    member's own (E, N, in)."""
     model.eval()
     totals = torch.zeros(2, model.ensemble, device=x.device)
+    n = x.shape[-2]
     with torch.no_grad():
         for start in range(0, len(x), batch):
-            xb = x[start : start + batch].expand(model.ensemble, -1, -1)
+            xb = x[..., start : start + batch, :].expand(model.ensemble, -1, -1)
             yb = y[start : start + batch].expand(model.ensemble, -1, -1)
             cb = None
             if contacts is not None:
@@ -108,7 +111,7 @@ def _evaluate(
             mse, pi = loss(model(xb), yb, with_pi, cb)
             totals += torch.stack([mse, pi]) * xb.shape[1]
     model.train()
-    return totals[0] / len(x), totals[1] / len(x)
+    return totals[0] / n, totals[1] / n
 
 
 @contextlib.contextmanager
@@ -252,9 +255,11 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
 
     data = read_dataset(job.dataset_path)
+    states, test_rollouts = _rollout_states(job, data, device)
     if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
         keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
         keep = keep.astype(np.int64)
+        states.kept = torch.as_tensor(keep, device=device)
         data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
         if data.train_contacts is not None:
             data.train_contacts = data.train_contacts[keep]
@@ -313,6 +318,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             group["weight_decay"] = weight_decay * factor
         model.seed_dropout([epoch_seed(seed, epoch, "dropout") for seed in seeds])
         noise.start_epoch(epoch)
+        states.start_epoch(model, epoch)
         order = torch.as_tensor(
             np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
         )  # (E, N)
@@ -320,7 +326,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         for start in range(0, n, batch):
             index = order[:, start : start + batch]
             contacts = None if c_train is None else c_train[index]
-            x = noise(x_train[index])
+            x = noise(states(x_train[index], index))
             clean = None
             if with_pi_train and not config.pi_dropout:
                 prediction, clean = model.forward_with_clean(x)
@@ -333,6 +339,11 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
         train_mse, train_pi = (totals / n).tolist()
         test = _evaluate(model, loss_fn, x_test, y_test, c_test, config.eval_batch_size, True)
+        if test_rollouts is not None:  # the test loss weighs own-rollout inputs as training
+            own = test_rollouts.inputs(model, x_test, y_test)
+            own = _evaluate(model, loss_fn, own, y_test, c_test, config.eval_batch_size, True)
+            share = config.rollout_states
+            test = tuple((1.0 - share) * a + share * b for a, b in zip(test, own, strict=True))
         test_mse, test_pi = (t.tolist() for t in test)
         if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
             every = max(1, n // 4096)
@@ -375,6 +386,33 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         }
         for i, seed in enumerate(seeds)
     }
+
+
+def _rollout_states(
+    job: _GroupJob, data, device: torch.device
+) -> tuple[RolloutStates, OwnRollouts | None]:
+    """train.rollout_states over every training sample (the kept ones set by the caller), and
+    the test clips' own rollouts (None when off)."""
+    config = job.params.train
+    x, y = (torch.as_tensor(a, dtype=torch.float32, device=device)
+            for a in (data.x_train, data.y_train))  # fmt: skip
+    rollouts = test_rollouts = None
+    if config.rollout_states > 0.0:
+        rollouts, test_rollouts = (
+            OwnRollouts(
+                data.layout,
+                data.stats,
+                origin,
+                config.rollout_steps,
+                device,
+                job.params.rollout.command_blend_tau,
+            )  # fmt: skip
+            for origin in (data.train_origin, data.test_origin)
+        )
+    kept = torch.arange(len(x), device=device)
+    states = RolloutStates(config.rollout_states, config.restart_period, rollouts, x, y, kept,
+                           job.seeds)  # fmt: skip
+    return states, test_rollouts
 
 
 def write_loss_csv(path: Path, history: list[dict]) -> None:

@@ -22,8 +22,8 @@ from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configu
 from pimann.errors import PimannError
 from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.features import clip_features, matrix_to_rpy
+from pimann.future_window import interpolation
 from pimann.generate import (
-    _interpolation,
     generate,
     generate_file,
     generate_rollout,
@@ -165,7 +165,7 @@ def test_future_window_interpolation_matches_numpy(rng):
     targets = np.array([-3.0, 9, 18, 26, 34, 43, 51])
     values = rng.normal(size=(len(knots), 3))
     expected = np.stack([np.interp(targets, knots, values[:, c]) for c in range(3)], 1)
-    np.testing.assert_allclose(_interpolation(targets, knots) @ values, expected, atol=1e-12)
+    np.testing.assert_allclose(interpolation(targets, knots) @ values, expected, atol=1e-12)
 
 
 def test_gait_walks_forward_with_alternating_contacts(robot, params):

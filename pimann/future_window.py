@@ -1,0 +1,43 @@
+"""How a rollout fills the future half of the input's velocity window (pimann.generate, step
+2): the previous prediction's output window, shifted by one step, blended with the command.
+Shared by the generator and by training on the model's own rollouts (pimann.rollout_states).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from pimann.feature_layout import FeatureLayout
+
+
+def command_weights(output_offsets: Sequence[int], tau: float) -> np.ndarray:
+    """(F,) the command's weight w = (t / window end)^tau in each sample of the output window
+    (the sample at t = 0 stays the network's own: 0)."""
+    offsets = np.asarray(output_offsets, dtype=float)
+    weights = np.clip(offsets / max(offsets.max(), 1.0), 0, 1) ** tau
+    weights[offsets <= 0] = 0.0
+    return weights
+
+
+def next_future_matrix(layout: FeatureLayout) -> np.ndarray:
+    """M (F_in, F_out): the next step's future input samples from this step's output window,
+    M @ f(output offsets) = f(input offsets + 1) (velocity at step i + o is the previous
+    prediction's sample at offset o + 1)."""
+    in_offsets = np.asarray(layout.input_offsets, dtype=float)
+    future = in_offsets[len(layout.past_input_offsets()) :]
+    return interpolation(future + 1.0, np.asarray(layout.output_offsets, dtype=float))
+
+
+def interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:
+    """Matrix M with M @ f(knots) = f(targets), linear between knots, clamped at the ends."""
+    matrix = np.zeros((len(targets), len(knots)))
+    for row, target in enumerate(np.clip(targets, knots[0], knots[-1])):
+        upper = min(int(np.searchsorted(knots, target, side="right")), len(knots) - 1)
+        lower = max(upper - 1, 0)
+        span = knots[upper] - knots[lower]
+        fraction = 0.0 if span == 0 else (target - knots[lower]) / span
+        matrix[row, lower] += 1.0 - fraction
+        matrix[row, upper] += fraction
+    return matrix
