@@ -378,14 +378,22 @@ def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_p
     assert not torch.allclose(pair(x) - x, moved)
 
 
-def test_input_noise_trains_differently_and_deterministically(tmp_path, params, dataset_path):
-    one_epoch = dataclasses.replace(params.train, epochs=1)
-    noisy = dataclasses.replace(one_epoch, input_noise=0.2)
-    for name, train in (("plain", one_epoch), ("noisy", noisy), ("noisy_again", noisy)):
+def trains_differently_and_deterministically(tmp_path, params, dataset_path, pi_weight, **change):
+    """Training with `change` to params.train twice gives the same weights, and not those of
+    training without it (every switch of this kind off)."""
+    plain = dataclasses.replace(params.train, input_noise=0.0, rollout_states=0.0)
+    changed = dataclasses.replace(plain, **change)
+    for name, train in (("plain", plain), ("changed", changed), ("changed_again", changed)):
         run = dataclasses.replace(params, train=train)
-        train_models(dataset_path, tmp_path / name, 0.0, [0], run, "cpu")
-    a, b = _weights(tmp_path / "noisy" / "0"), _weights(tmp_path / "noisy_again" / "0")
+        train_models(dataset_path, tmp_path / name, pi_weight, [0], run, "cpu")
+    a, b = _weights(tmp_path / "changed" / "0"), _weights(tmp_path / "changed_again" / "0")
     assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
     assert not torch.equal(
         a["expert_weight_2"], _weights(tmp_path / "plain" / "0")["expert_weight_2"]
     )
+
+
+def test_input_noise_trains_differently_and_deterministically(tmp_path, params, dataset_path):
+    one_epoch = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    trains_differently_and_deterministically(tmp_path, one_epoch, dataset_path, 0.0,
+                                             input_noise=0.2)  # fmt: skip
