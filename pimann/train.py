@@ -102,7 +102,7 @@ def _evaluate(
     totals = torch.zeros(2, model.ensemble, device=x.device)
     n = x.shape[-2]
     with torch.no_grad():
-        for start in range(0, len(x), batch):
+        for start in range(0, n, batch):
             xb = x[..., start : start + batch, :].expand(model.ensemble, -1, -1)
             yb = y[start : start + batch].expand(model.ensemble, -1, -1)
             cb = None
@@ -255,11 +255,12 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
 
     data = read_dataset(job.dataset_path)
-    states, test_rollouts = _rollout_states(job, data, device)
+    keep = np.arange(len(data.x_train))
     if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
         keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
         keep = keep.astype(np.int64)
-        states.kept = torch.as_tensor(keep, device=device)
+    states, test_rollouts = _rollout_states(job, data, keep, device)  # from every sample
+    if len(keep) < len(data.x_train):
         data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
         if data.train_contacts is not None:
             data.train_contacts = data.train_contacts[keep]
@@ -389,27 +390,22 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
 
 
 def _rollout_states(
-    job: _GroupJob, data, device: torch.device
+    job: _GroupJob, data, keep: np.ndarray, device: torch.device
 ) -> tuple[RolloutStates, OwnRollouts | None]:
-    """train.rollout_states over every training sample (the kept ones set by the caller), and
-    the test clips' own rollouts (None when off)."""
+    """train.rollout_states, rolled out along every training sample and used on the `keep`
+    ones, and the test clips' own rollouts; neither holds data when the switch is off."""
     config = job.params.train
+    kept = torch.as_tensor(keep, device=device)
+    if config.rollout_states == 0.0:
+        nothing = torch.empty(0, device=device)
+        return RolloutStates(0.0, 0, None, nothing, nothing, kept, job.seeds), None
     x, y = (torch.as_tensor(a, dtype=torch.float32, device=device)
             for a in (data.x_train, data.y_train))  # fmt: skip
-    rollouts = test_rollouts = None
-    if config.rollout_states > 0.0:
-        rollouts, test_rollouts = (
-            OwnRollouts(
-                data.layout,
-                data.stats,
-                origin,
-                config.rollout_steps,
-                device,
-                job.params.rollout.command_blend_tau,
-            )  # fmt: skip
-            for origin in (data.train_origin, data.test_origin)
-        )
-    kept = torch.arange(len(x), device=device)
+    tau = job.params.rollout.command_blend_tau
+    rollouts, test_rollouts = (
+        OwnRollouts(data.layout, data.stats, origin, config.rollout_steps, device, tau)
+        for origin in (data.train_origin, data.test_origin)
+    )
     states = RolloutStates(config.rollout_states, config.restart_period, rollouts, x, y, kept,
                            job.seeds)  # fmt: skip
     return states, test_rollouts

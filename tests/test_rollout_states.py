@@ -138,8 +138,9 @@ def test_the_test_loss_weighs_own_rollouts_as_training(tmp_path, params, dataset
 
     share = 0.5
     train = dataclasses.replace(
-        params.train, epochs=2, restart_period=1, rollout_states=share, rollout_steps=10
-    )
+        params.train, epochs=2, restart_period=1, rollout_states=share, rollout_steps=10,
+        eval_batch_size=7,  # several test batches, each member's own inputs among them
+    )  # fmt: skip
     run = dataclasses.replace(params, train=train)
     train_models(dataset_path, tmp_path / "own", 0.0, [0], run, "cpu", plots_dir=tmp_path / "p")
     model, layout, stats, meta = load_model(tmp_path / "own" / "0")
