@@ -27,7 +27,9 @@ import torch
 
 from pimann.epochs import epoch_seed
 from pimann.feature_layout import FeatureLayout, Normalisation
+from pimann.features import FeatureDataset
 from pimann.future_window import command_weights, next_future_matrix
+from pimann.params import TrainParams
 
 
 def rollout_pieces(origin: np.ndarray, steps: int) -> np.ndarray:
@@ -203,3 +205,29 @@ class RolloutStates:
             [torch.rand(index.shape[1], generator=g, device=x.device) for g in self.generators]
         )
         return torch.where((use < self.fraction)[..., None], own, x)
+
+
+def training_states(
+    config: TrainParams,
+    command_blend_tau: float,
+    data: FeatureDataset,
+    keep: np.ndarray,
+    seeds: list[int],
+    device: torch.device,
+) -> tuple[RolloutStates, OwnRollouts | None]:
+    """train.rollout_states for a training run: rolled out along every training sample and used
+    on the `keep` ones, and the test clips' own rollouts; neither holds data when it is off."""
+    kept = torch.as_tensor(keep, device=device)
+    if config.rollout_states == 0.0:
+        nothing = torch.empty(0, device=device)
+        return RolloutStates(0.0, 0, None, nothing, nothing, kept, seeds), None
+    x, y = (torch.as_tensor(a, dtype=torch.float32, device=device)
+            for a in (data.x_train, data.y_train))  # fmt: skip
+    rollouts, test_rollouts = (
+        OwnRollouts(data.layout, data.stats, origin, config.rollout_steps, device,
+                    command_blend_tau)
+        for origin in (data.train_origin, data.test_origin)
+    )  # fmt: skip
+    states = RolloutStates(config.rollout_states, config.restart_period, rollouts, x, y, kept,
+                           seeds)  # fmt: skip
+    return states, test_rollouts

@@ -36,12 +36,13 @@ from pimann.atomic import atomic_path
 from pimann.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
 from pimann.errors import PimannError
 from pimann.features import read_dataset
+from pimann.held_out_loss import HeldOutLoss, batched_loss
 from pimann.mann import MANN
 from pimann.model_files import save_model
 from pimann.parallel import cpu_workers, pool_map
 from pimann.params import Params, as_dict
 from pimann.progress import Progress
-from pimann.rollout_states import OwnRollouts, RolloutStates
+from pimann.rollout_states import training_states
 from pimann.training_loss import TrainingLoss
 
 log = logging.getLogger(__name__)
@@ -85,33 +86,6 @@ def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params:
         [digest, pi_weight, seeds, as_dict(params.model), as_dict(train)], sort_keys=True
     )
     return hashlib.sha256(blob.encode()).hexdigest()
-
-
-def _evaluate(
-    model: MANN,
-    loss: TrainingLoss,
-    x: torch.Tensor,
-    y: torch.Tensor,
-    contacts: torch.Tensor | None,
-    batch: int,
-    with_pi: bool,
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Test-set (mse, pi) per member, averaged over samples, dropout off; x (N, in) or each
-    member's own (E, N, in)."""
-    model.eval()
-    totals = torch.zeros(2, model.ensemble, device=x.device)
-    n = x.shape[-2]
-    with torch.no_grad():
-        for start in range(0, n, batch):
-            xb = x[..., start : start + batch, :].expand(model.ensemble, -1, -1)
-            yb = y[start : start + batch].expand(model.ensemble, -1, -1)
-            cb = None
-            if contacts is not None:
-                cb = contacts[start : start + batch].expand(model.ensemble, -1, -1)
-            mse, pi = loss(model(xb), yb, with_pi, cb)
-            totals += torch.stack([mse, pi]) * xb.shape[1]
-    model.train()
-    return totals[0] / n, totals[1] / n
 
 
 @contextlib.contextmanager
@@ -259,7 +233,9 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
         keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
         keep = keep.astype(np.int64)
-    states, test_rollouts = _rollout_states(job, data, keep, device)  # from every sample
+    states, test_rollouts = training_states(
+        config, job.params.rollout.command_blend_tau, data, keep, job.seeds, device
+    )  # rolled out from every training sample
     if len(keep) < len(data.x_train):
         data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
         if data.train_contacts is not None:
@@ -305,6 +281,8 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         else:
             log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
 
+    test_loss = HeldOutLoss(loss_fn, x_test, y_test, c_test, config.eval_batch_size, test_rollouts,
+                         config.rollout_states)  # fmt: skip
     with_pi_train = pi_weight != 0.0
     noise = InputNoise(config.input_noise, data.layout.fed_back_columns(), seeds, device)
     last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
@@ -339,18 +317,12 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
             optimizer.step()
             totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
         train_mse, train_pi = (totals / n).tolist()
-        test = _evaluate(model, loss_fn, x_test, y_test, c_test, config.eval_batch_size, True)
-        if test_rollouts is not None:  # the test loss weighs own-rollout inputs as training
-            own = test_rollouts.inputs(model, x_test, y_test)
-            own = _evaluate(model, loss_fn, own, y_test, c_test, config.eval_batch_size, True)
-            share = config.rollout_states
-            test = tuple((1.0 - share) * a + share * b for a, b in zip(test, own, strict=True))
-        test_mse, test_pi = (t.tolist() for t in test)
+        test_mse, test_pi = (t.tolist() for t in test_loss(model))
         if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
             every = max(1, n // 4096)
             sample = (x_train[::every], y_train[::every])
             sample += (None if c_train is None else c_train[::every],)
-            train_pi = _evaluate(model, loss_fn, *sample, config.eval_batch_size, True)[1].tolist()
+            train_pi = batched_loss(model, loss_fn, *sample, config.eval_batch_size)[1].tolist()
         for k in range(members):
             row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
             row.update(
@@ -387,28 +359,6 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
         }
         for i, seed in enumerate(seeds)
     }
-
-
-def _rollout_states(
-    job: _GroupJob, data, keep: np.ndarray, device: torch.device
-) -> tuple[RolloutStates, OwnRollouts | None]:
-    """train.rollout_states, rolled out along every training sample and used on the `keep`
-    ones, and the test clips' own rollouts; neither holds data when the switch is off."""
-    config = job.params.train
-    kept = torch.as_tensor(keep, device=device)
-    if config.rollout_states == 0.0:
-        nothing = torch.empty(0, device=device)
-        return RolloutStates(0.0, 0, None, nothing, nothing, kept, job.seeds), None
-    x, y = (torch.as_tensor(a, dtype=torch.float32, device=device)
-            for a in (data.x_train, data.y_train))  # fmt: skip
-    tau = job.params.rollout.command_blend_tau
-    rollouts, test_rollouts = (
-        OwnRollouts(data.layout, data.stats, origin, config.rollout_steps, device, tau)
-        for origin in (data.train_origin, data.test_origin)
-    )
-    states = RolloutStates(config.rollout_states, config.restart_period, rollouts, x, y, kept,
-                           job.seeds)  # fmt: skip
-    return states, test_rollouts
 
 
 def write_loss_csv(path: Path, history: list[dict]) -> None:

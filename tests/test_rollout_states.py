@@ -16,9 +16,11 @@ from test_train import (  # noqa: F401 (fixtures)
 
 from pimann.epochs import epoch_seed
 from pimann.features import read_dataset
+from pimann.held_out_loss import HeldOutLoss, batched_loss
 from pimann.mann import MANN
 from pimann.rollout_states import OwnRollouts, RolloutStates, rollout_pieces
 from pimann.train import train_models
+from pimann.training_loss import TrainingLoss
 
 
 def test_pieces_follow_clips_gaps_and_length():
@@ -157,3 +159,24 @@ def test_the_test_loss_weighs_own_rollouts_as_training(tmp_path, params, dataset
     recorded = float(rows[meta["best_epoch"] - 1]["test_mse"])
     assert abs(on_own - on_data) > 1e-4  # the mix is told apart from either part
     assert recorded == pytest.approx((1 - share) * on_data + share * on_own, abs=1e-5)
+
+
+def test_held_out_loss_batches_and_mixes_the_data_and_own_inputs(own):
+    """batched_loss in batches of 7 equals one pass over every sample, shared or per-member
+    inputs; HeldOutLoss weighs the own-rollout inputs by the share."""
+    data, model, rollouts, x, y, inputs = own
+    cpu = torch.device("cpu")
+    loss = TrainingLoss(data.layout, data.stats, "predicted", cpu)
+    with torch.no_grad():
+        once = loss(model(x.expand(2, -1, -1)), y.expand(2, -1, -1))
+        own_once = loss(model(inputs), y.expand(2, -1, -1))
+    for inputs_, expected in ((x, once), (inputs, own_once)):
+        batched = batched_loss(model, loss, inputs_, y, None, 7)
+        for got, want in zip(batched, expected, strict=True):
+            torch.testing.assert_close(got, want, rtol=1e-5, atol=1e-7)
+    assert not torch.allclose(once[0], own_once[0])  # the mix below is not trivially equal
+    mixed = HeldOutLoss(loss, x, y, None, 7, rollouts, 0.25)(model)
+    for got, a, b in zip(mixed, once, own_once, strict=True):
+        torch.testing.assert_close(got, 0.75 * a + 0.25 * b, rtol=1e-5, atol=1e-7)
+    plain = HeldOutLoss(loss, x, y, None, 7, None, 0.25)(model)
+    torch.testing.assert_close(plain[0], once[0], rtol=1e-5, atol=1e-7)
