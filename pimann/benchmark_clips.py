@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pimann.command_following import clip_commands
+from pimann.clip_commands import clip_commands
 from pimann.errors import PimannError
 from pimann.features import split_sources
 from pimann.params import Params
@@ -32,7 +32,7 @@ def held_out_clips(collection: str | Path, params: Params) -> list[tuple[str, Tr
 def benchmark_scripts(params: Params) -> dict[str, list[Segment]]:
     """{clip_<clip name>: script} of the command-following benchmark: each test clip of the
     features stage's split (collection `features.input`) as the commands of its own base
-    motion (pimann.command_following.clip_commands)."""
+    motion (pimann.clip_commands.clip_commands)."""
     scripts: dict[str, list[Segment]] = {}
     for name, trajectory in held_out_clips(REPO_ROOT / params.features.input, params):
         scenario = clip_scenario(name)

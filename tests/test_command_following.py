@@ -20,6 +20,7 @@ from test_data_report import RATE, make_trajectory
 from test_generate import GaitModel, roll
 
 from pimann import command_following as cf
+from pimann.clip_commands import clip_commands, segment_class
 from pimann.command_following_figure import fig_command_following
 from pimann.figures import style
 from pimann.params import MotionSegment, StandSegment, load_params
@@ -74,9 +75,9 @@ def assert_segments(found, expected, duration_tol=0.1, speed_tol=0.03, yaw_tol=0
 
 def test_clip_commands_recover_stand_forward_backward():
     trajectory = make_trajectory(*follow(SCRIPT, heading=0.7))
-    found = cf.clip_commands(trajectory)
+    found = clip_commands(trajectory)
     assert_segments(found, SCRIPT, duration_tol=0.03, speed_tol=0.005, yaw_tol=1e-6)
-    assert [cf.segment_class(s) for s in found] == ["standing", "forward", "backward"]
+    assert [segment_class(s) for s in found] == ["standing", "forward", "backward"]
 
 
 def test_clip_commands_of_a_swaying_gait_with_turns_and_side_steps():
@@ -91,9 +92,9 @@ def test_clip_commands_of_a_swaying_gait_with_turns_and_side_steps():
         StandSegment(2.0, True),
     ]
     trajectory = make_trajectory(*follow(script, heading=-1.0, wobble=0.1, sway=0.3))
-    found = cf.clip_commands(trajectory)
+    found = clip_commands(trajectory)
     assert_segments(found, script, duration_tol=0.1, speed_tol=0.03, yaw_tol=0.03)
-    classes = [cf.segment_class(s) for s in found]
+    classes = [segment_class(s) for s in found]
     assert classes == [
         "standing", "forward", "turning", "side", "backward", "turning_in_place", "standing"
     ]  # fmt: skip
@@ -101,7 +102,7 @@ def test_clip_commands_of_a_swaying_gait_with_turns_and_side_steps():
 
 def test_clip_commands_keep_a_steady_walk_whole_and_feed_the_generator():
     script = [MotionSegment(6.0, 0.5, 0.1, 0.0)]
-    found = cf.clip_commands(make_trajectory(*follow(script, wobble=0.1, sway=0.2)))
+    found = clip_commands(make_trajectory(*follow(script, wobble=0.1, sway=0.2)))
     assert_segments(found, script, speed_tol=0.01)
     # the frames a rollout of the found script has are the clip's
     assert cf.segment_frames(found, RATE)[-1][1] == 300
@@ -110,7 +111,7 @@ def test_clip_commands_keep_a_steady_walk_whole_and_feed_the_generator():
 def test_a_clip_follows_its_own_commands(robot):
     """The data's own score: a swaying clip measured against the script cut from it."""
     clip = make_trajectory(*follow(SCRIPT, heading=2.0, wobble=0.1, sway=0.3))
-    script = cf.clip_commands(clip)
+    script = clip_commands(clip)
     rows = cf.follow_measures(clip, script, robot, EVALUATE_PARAMS)
     assert [r["class"] for r in rows] == ["standing", "forward", "backward"]
     for row in rows[1:]:

@@ -16,7 +16,7 @@ import pytest
 from test_data_reference import walking_clip
 
 from pimann.benchmark_clips import benchmark_scripts
-from pimann.command_following import clip_commands
+from pimann.clip_commands import clip_commands
 from pimann.errors import PimannError
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
