@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from pimann import command_following as cf
 from pimann.atomic import atomic_path, write_text_atomic
 from pimann.benchmark_clips import held_out_clips
+from pimann.clip_commands import clip_commands
 from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
 from pimann.params import Params, StandSegment
@@ -103,7 +104,7 @@ def _rollout_job(job: tuple[Path, Params]) -> list[dict[str, Any]]:
 
 def _data_job(job: tuple[Any, Params]) -> list[dict[str, Any]]:
     trajectory, params = job
-    return measure(trajectory, cf.clip_commands(trajectory), params)
+    return measure(trajectory, clip_commands(trajectory), params)
 
 
 def collect_following(
