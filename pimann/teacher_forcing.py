@@ -9,7 +9,11 @@ training is. Run after `dvc repro` (it reads models/ and data/features):
 
 prints, per model seed and motion class (pimann.motion_classes of the sample's frame), the
 mean true and predicted forward and lateral base velocity and the least-squares slope of the
-prediction on the truth (1: follows the data; 0: ignores it).
+prediction on the truth (1: follows the data; 0: ignores it); and on the samples in single
+support (the data's contact flags) the same for the contact leg's share of the sole's forward
+velocity, (J_SF^B)^-1 J_SF^s sdot along the base's x (pimann.physics_loss), which on a still
+foot cancels the base's forward velocity: L_B charges their sum, so where a model predicts a
+small base velocity this tells whether its legs shrank with it.
 """
 
 from __future__ import annotations
@@ -29,6 +33,7 @@ from pimann.motion_classes import CLASSES, motion_classes
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
 from pimann.rollout_layout import model_seeds
+from pimann.training_loss import TrainingLoss
 from pimann.trajectory import iter_collection
 
 OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
@@ -46,6 +51,21 @@ def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
     return float(centred @ (prediction - prediction.mean())) / denominator if denominator else 0.0
 
 
+def contact_leg_velocity(
+    loss: TrainingLoss, y: np.ndarray, contacts: np.ndarray | None
+) -> np.ndarray:
+    """(N,) the contact leg's share of its sole's forward velocity (base frame) in the
+    normalised outputs `y`; NaN outside single support or without contact flags."""
+    if contacts is None:
+        return np.full(len(y), np.nan)
+    with torch.no_grad():
+        terms = loss.pi_terms(torch.as_tensor(y, dtype=torch.float32))
+        feet, _ = loss.physics.foot_twists(terms["joints"], terms["joint_velocities"])
+    left = torch.as_tensor(contacts[:, 0])
+    share = torch.where(left, feet[:, 0, 0], feet[:, 1, 0]).numpy()
+    return np.where(contacts.sum(axis=1) == 1, share, np.nan)
+
+
 def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
     """One row per model seed, split (train subset / test) and motion class."""
     from pimann.model_files import load_model
@@ -59,33 +79,47 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
             dataset = read_dataset(dataset_path)
             take = np.linspace(0, len(dataset.x_train) - 1, min(samples, len(dataset.x_train)))
             take = take.astype(int)
+            train_contacts = dataset.train_contacts
             parts = {
-                "train": (dataset.x_train[take], dataset.y_train[take], dataset.train_origin[take]),
-                "test": (dataset.x_test, dataset.y_test, dataset.test_origin),
-            }
+                "train": (dataset.x_train[take], dataset.y_train[take], dataset.train_origin[take],
+                          None if train_contacts is None else train_contacts[take]),
+                "test": (dataset.x_test, dataset.y_test, dataset.test_origin,
+                         dataset.test_contacts),
+            }  # fmt: skip
             classes = {
                 split: sample_classes(collection, dataset.clips, origin)
-                for split, (_, _, origin) in parts.items()
+                for split, (_, _, origin, _) in parts.items()
             }
             cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes)
         names, parts, classes = cache[str(dataset_path)]
         columns = [names.index(name) for name in OUTPUTS]
-        for split, (x, y, _) in parts.items():
+        loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
+        for split, (x, y, _, contacts) in parts.items():
             with torch.no_grad():
                 predicted = model(torch.as_tensor(x, dtype=torch.float32)).numpy()
             truth = y[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
             prediction = predicted[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
+            leg_truth = contact_leg_velocity(loss, y, contacts)
+            leg_prediction = contact_leg_velocity(loss, predicted, contacts)
             for name in CLASSES:
                 mask = classes[split] == name
                 if mask.sum() < 50:
                     continue
+                single = mask & np.isfinite(leg_truth)
+                leg = {"leg_true": np.nan, "leg_pred": np.nan, "leg_slope": np.nan}
+                if single.sum() >= 50:
+                    true_leg, predicted_leg = leg_truth[single], leg_prediction[single]
+                    leg = {
+                        "leg_true": true_leg.mean(), "leg_pred": predicted_leg.mean(),
+                        "leg_slope": _slope(true_leg, predicted_leg),
+                    }  # fmt: skip
                 rows.append({
                     "model": models_dir.name, "seed": seed, "split": split, "class": name,
                     "samples": int(mask.sum()),
                     "vx_true": truth[mask, 0].mean(), "vx_pred": prediction[mask, 0].mean(),
                     "vy_true": truth[mask, 1].mean(), "vy_pred": prediction[mask, 1].mean(),
                     "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
-                    "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]),
+                    "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]), **leg,
                 })  # fmt: skip
     return pd.DataFrame(rows)
 

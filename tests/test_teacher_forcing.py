@@ -57,3 +57,34 @@ def test_models_folder_or_one_training_output_and_a_named_error(tmp_path, capsys
     assert main(["--models", str(tmp_path / "notes")]) == 2
     error = capsys.readouterr().err
     assert "notes" in error and "no trained models" in error and error.count("\n") == 1
+
+
+def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(robot):
+    """The contact sole's forward velocity that the joints alone give, base at rest at the
+    origin (pinocchio, WORLD = base axes), for the foot in contact; NaN in double support, in
+    flight, or without contact flags."""
+    import pinocchio as pin
+
+    from pimann.robot import LEFT_SOLE, RIGHT_SOLE
+    from pimann.teacher_forcing import contact_leg_velocity
+    from pimann.training_loss import TrainingLoss
+
+    params = load_params()
+    dataset = build_dataset(synthetic_collection(n_sources=2, frames=120), params.features, "full")
+    layout, stats = dataset.layout, dataset.stats
+    y = dataset.y_train[:6]
+    contacts = np.array([[1, 0], [0, 1], [1, 1], [0, 0], [1, 0], [0, 1]], bool)
+    loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
+    share = contact_leg_velocity(loss, y, contacts)
+    assert np.isnan(share[[2, 3]]).all()
+    assert np.isnan(contact_leg_velocity(loss, y, None)).all()
+    physical = y * stats.y_std + stats.y_mean
+    for k in (0, 1, 4, 5):
+        joints = physical[k, layout.y_slices["joints"]]
+        velocities = physical[k, layout.y_slices["joint_velocities"]]
+        q = robot.configuration(np.zeros(3), np.array([0.0, 0.0, 0.0, 1.0]), joints)
+        v = robot.velocity(np.zeros(3), np.zeros(3), velocities)
+        sole = LEFT_SOLE if contacts[k, 0] else RIGHT_SOLE
+        expected = (robot.frame_jacobian(q, sole, pin.WORLD) @ v)[0]
+        assert share[k] == pytest.approx(expected, abs=1e-4)
+    assert np.ptp(share[[0, 1, 4, 5]]) > 1e-3  # the samples differ: not a constant passing
