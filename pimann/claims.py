@@ -265,14 +265,20 @@ def _foot_pitch_grows(data: SeedData, figures: FiguresParams) -> Claim:
     rho = float(spearmanr(list(medians), list(medians.values())).statistic)
     ends = list(values.values())
     status = order(ends[0], ends[-1]) if rho >= 0.8 else FAILS
+    reason = {HOLDS: "grows with w (rho >= 0.8), largest w's seeds above the smallest w's",
+              WITHIN_SPREAD: "medians grow (rho >= 0.8), end seed ranges overlap"}.get(
+        status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)"
+    )  # fmt: skip
+    if status == FAILS:  # a weight whose rollouts stand keeps its feet flat: name it
+        walking = {w: _walk_fraction(data, w, figures.foot_steering) for w in values}
+        standing = [f"w={weight_label(w)} ({f:.0%} of seeds walk)"
+                    for w, f in walking.items() if f is not None and f < 1.0]  # fmt: skip
+        if standing:
+            reason += "; not every seed walks at " + ", ".join(standing)
     return dataclasses.replace(
-        claim, status=status,
+        claim, status=status, reason=reason,
         ours="rad: " + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items())
         + f"; Spearman rho of the medians {rho:.2f}",
-        reason={HOLDS: "grows with w (rho >= 0.8), largest w's seeds above the smallest w's",
-                WITHIN_SPREAD: "medians grow (rho >= 0.8), end seed ranges overlap"}.get(
-            status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)"
-        ),
     )  # fmt: skip
 
 

@@ -211,3 +211,16 @@ def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
         assert len(re.findall(r"(?<!\\)\|", row)) == 9, row
     assert data_claim(None) is None
     assert "| D |" not in claims_markdown(claims, {"profile": "quick"})
+
+
+def test_foot_pitch_claim_names_the_weights_that_stand(params):
+    """C9 fails when w=100's feet stay flat; its reason says w=100's unsteered seeds stand,
+    and says nothing of standing once they walk."""
+    values = {k: dict(v) for k, v in AGREEING.items()}
+    values["contact_sole_pitch_max_abs"].update(w100=0.01)  # below every other weight's
+    frame = crafted_metrics(values)
+    (c9,) = [c for c in evaluate_claims(frame, params.figures) if c.id == "C9"]
+    assert c9.status == FAILS and "w=100 (0% of seeds walk)" in c9.reason
+    frame.loc[frame["model"] == "w100", "walks"] = True
+    (c9,) = [c for c in evaluate_claims(frame, params.figures) if c.id == "C9"]
+    assert c9.status == FAILS and "walks at" not in c9.reason
