@@ -90,16 +90,21 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                 split: sample_classes(collection, dataset.clips, origin)
                 for split, (_, _, origin, _) in parts.items()
             }
-            cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes)
-        names, parts, classes = cache[str(dataset_path)]
+            # the data's own leg shares, once per dataset: its stats are the models' own
+            loss = TrainingLoss(dataset.layout, dataset.stats, "predicted", torch.device("cpu"))
+            leg_truths = {
+                split: contact_leg_velocity(loss, y, contacts)
+                for split, (_, y, _, contacts) in parts.items()
+            }
+            cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes, loss, leg_truths)
+        names, parts, classes, loss, leg_truths = cache[str(dataset_path)]
         columns = [names.index(name) for name in OUTPUTS]
-        loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
         for split, (x, y, _, contacts) in parts.items():
             with torch.no_grad():
                 predicted = model(torch.as_tensor(x, dtype=torch.float32)).numpy()
             truth = y[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
             prediction = predicted[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
-            leg_truth = contact_leg_velocity(loss, y, contacts)
+            leg_truth = leg_truths[split]
             leg_prediction = contact_leg_velocity(loss, predicted, contacts)
             for name in CLASSES:
                 mask = classes[split] == name
