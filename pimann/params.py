@@ -142,7 +142,7 @@ class TrainParams:
     restart_mult: int  # each cycle this many times longer (Tmult)
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
     pi_support: Literal["lower_sole", "data_contacts"]  # which foot L_B keeps still
-    pi_gradient: Literal["both", "joints", "base"]  # which predictions L_B's gradient moves
+    pi_gradient: Literal["both", "joints", "base", "joint_velocities"]  # what L_B's gradient moves
     pi_dropout: bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
     input_noise: float  # std (normalised units) of noise on the fed-back inputs; 0: the paper
     rollout_states: float  # share of samples with own-rollout inputs (pimann.rollout_states)

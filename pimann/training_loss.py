@@ -19,6 +19,13 @@ _HELD = {
     "both": (),
     "joints": ("base_linear_velocity", "base_angular_velocity"),
     "base": ("base_position", "base_rpy", "joints", "joint_velocities"),
+    "joint_velocities": (
+        "base_linear_velocity",
+        "base_angular_velocity",
+        "base_position",
+        "base_rpy",
+        "joints",
+    ),
 }
 
 

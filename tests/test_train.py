@@ -287,10 +287,11 @@ def test_training_on_a_broken_dataset_names_it_and_writes_nothing(
     assert sorted(p.name for p in tmp_path.iterdir()) == ["full.h5"]
 
 
-@pytest.mark.parametrize("side", ["both", "joints", "base"])
+@pytest.mark.parametrize("side", ["both", "joints", "base", "joint_velocities"])
 def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
-    """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs unless `joints`,
-    the joint velocity outputs unless `base`; the loss's value is the same."""
+    """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs only with `both`
+    or `base`, the joint velocity outputs unless `base`, the configuration (base pose, joints)
+    unless `base` or `joint_velocities`; the loss's value is the same."""
     from pimann.features import read_dataset
 
     data = read_dataset(dataset_path)
@@ -305,9 +306,12 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
     (grad,) = torch.autograd.grad(pi.sum(), prediction)
     s, now = data.layout.y_slices, data.layout.current_output
     base = grad[..., s["base_linear_future"]].unflatten(-1, (-1, 3))[..., now, :]
-    joints = grad[..., s["joint_velocities"]]
-    assert (base.abs().max() > 0) == (side != "joints")
-    assert (joints.abs().max() > 0) == (side != "base")
+    joint_velocities = grad[..., s["joint_velocities"]]
+    pose = ("base_position", "base_rpy", "joints")
+    configuration = torch.cat([grad[..., s[name]] for name in pose], -1)
+    assert (base.abs().max() > 0) == (side in ("both", "base"))
+    assert (joint_velocities.abs().max() > 0) == (side != "base")
+    assert (configuration.abs().max() > 0) == (side in ("both", "joints"))
 
 
 def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_path):
