@@ -10,6 +10,9 @@ RMSE a 10 s forward rollout as good as the clip would score. The level is the me
 clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over the test clips
 (the features stage's split by source clip, a clip and its mirror together).
 
+Beside them, where in a stance the data slides (pimann.stance_phases: the shares of the linear
+sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
+
 The retargeted data carries no joint velocities, so its velocity and position levels coincide
 (both from finite differences of the configurations).
 """
@@ -27,12 +30,17 @@ from pimann.motion_classes import CLASSES, motion_classes
 from pimann.parallel import pool_map
 from pimann.params import EvaluateParams, Params
 from pimann.robot import load_robot
+from pimann.stance_phases import PHASES, SHARE_METRICS, phase_share_metrics
 from pimann.trajectory import Trajectory, iter_collection
 
 FRAMES = 500  # the paper's test: 10 s at 50 Hz
 MIN_FORWARD_FRAMES = 250  # a clip counts with at least 5 s of forward walking at 50 Hz
 LABEL = "data (retargeted, forward walking)"
-METRICS = [f"support_rmse_{name}_total" for name in SLIDING]
+METRICS = (
+    [f"support_rmse_{name}_total" for name in SLIDING]
+    + [f"support_rmse_{name}_{phase}_share" for name in SHARE_METRICS for phase in PHASES]
+    + [f"contact_{phase}_frames_share" for phase in PHASES]
+)
 
 
 def clip_reference(trajectory: Trajectory, params: EvaluateParams) -> dict[str, Any]:
@@ -48,6 +56,8 @@ def clip_reference(trajectory: Trajectory, params: EvaluateParams) -> dict[str, 
         per_frame = sliding[name].mean(axis=1)  # the frame's share of the left-right mean
         value = FRAMES * float(per_frame[forward].mean()) if forward.any() else None
         row[f"support_rmse_{name}_total"] = value
+    rms = {name: sliding[name] for name in SHARE_METRICS}
+    row.update(phase_share_metrics(rms, sliding["contacts"], trajectory.rate_hz, forward))
     return row
 
 

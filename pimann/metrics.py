@@ -50,6 +50,7 @@ from pimann.contacts import (
 from pimann.errors import PimannError, about
 from pimann.params import EvaluateParams, load_params
 from pimann.robot import Robot, load_robot
+from pimann.stance_phases import SHARE_METRICS, phase_share_metrics
 from pimann.trajectory import Trajectory, iter_collection, read_trajectory
 
 SIDES = ("left", "right")
@@ -296,6 +297,8 @@ def trajectory_metrics(
         metrics[f"support_rmse_{name}_total"] = float(sums.mean())
         if name in ("linear", "angular"):
             metrics[f"support_rmse_{name}_mean_per_contact_frame"] = _mean_where(rms, contacts)
+    rms = {name: a.rms(name) for name in SHARE_METRICS}
+    metrics.update(phase_share_metrics(rms, contacts, metrics["rate_hz"]))
     for suffix, level in (("", "velocity"), ("_position", "position")):
         horizontal_speed = np.linalg.norm(a.velocities(level)[..., :2], axis=-1)
         metrics[f"contact_foot_speed_mean{suffix}"] = _mean_where(horizontal_speed, contacts)
