@@ -150,12 +150,22 @@ def data_claim(reference: dict[str, Any] | None) -> Claim | None:
             f"angular {value('angular' + suffix)}"
         )
 
+    def liftoff(subset: dict[str, Any]) -> str:
+        def median(metric: str) -> str:
+            stats = subset.get("metrics", {}).get(metric) or {}
+            return fmt(stats.get("median"))
+
+        return (
+            f"; lift-off share {median('support_rmse_linear_position_liftoff_share')} (of "
+            f"{median('contact_liftoff_frames_share')} of the contact frames)"
+        )
+
     parts = []
     for name in ("all", "test"):
         subset = reference.get(name) or {}
         parts.append(
             f"{name} clips ({subset.get('used', 0)} of {subset.get('clips', 0)}): velocity level "
-            f"{level(subset, '')}; position level {level(subset, '_position')}"
+            f"{level(subset, '')}; position level {level(subset, '_position')}{liftoff(subset)}"
         )
     coincide = reference.get("joint_velocities") == "differences"
     return Claim(

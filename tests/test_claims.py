@@ -49,6 +49,8 @@ REFERENCE = {
         "support_rmse_linear_position_total": {"median": 12.0},
         "support_rmse_linear_position_world_total": {"median": 13.2},
         "support_rmse_angular_position_total": {"median": 2.44},
+        "support_rmse_linear_position_liftoff_share": {"median": 0.31},
+        "contact_liftoff_frames_share": {"median": 0.18},
     }},
     "test": {"clips": 6, "used": 0, "metrics": {}},
 }  # fmt: skip
@@ -206,6 +208,7 @@ def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
     assert rows[0].startswith("| id |") and rows[1].startswith("| D | data (retargeted")
     assert "velocity level linear 12 (world 13.2), angular 2.44" in rows[1]
     assert "both levels coincide" in rows[1]
+    assert "lift-off share 0.31 (of 0.18 of the contact frames)" in rows[1]
     assert len(rows) == 2 + len(claims)
     for row in rows:  # every row keeps 8 columns: "|" inside a cell is escaped
         assert len(re.findall(r"(?<!\\)\|", row)) == 9, row
