@@ -32,8 +32,8 @@ RULES = [
     f"**{WITHIN_SPREAD}**: only the seed medians order as claimed (not counted as holding).",
     f"**{STANDS_STILL}**: it would hold, but some seed of a model the claim favours (the one "
     "said to slide, drift or move less) does not walk: forward base travel < "
-    "evaluate.walk_distance (not counted as holding). Not applied to C6-C8 (about walking) "
-    "and C9 (standing still does not pitch the feet).",
+    "evaluate.walk_distance, or fewer than 2 touchdowns (not counted as holding). Not "
+    "applied to C6-C8 (about walking) and C9 (standing still does not pitch the feet).",
     "**does not hold**: the medians do not order as claimed.",
     f"C1: holds when the baseline's median is within a factor {C1_FACTOR:g} of the paper's "
     "number, both parts (angular directly; linear in the authors' world representation). C4 "
@@ -131,7 +131,8 @@ def stands_still(
     ]
     if not still:
         return claim
-    reason = f"{claim.reason}; but {'; '.join(still)} do not walk (travel < walk_distance)"
+    still_text = "; ".join(still)
+    reason = f"{claim.reason}; but {still_text} do not walk (travel < walk_distance or no steps)"
     return dataclasses.replace(claim, status=STANDS_STILL, reason=reason)
 
 

@@ -203,7 +203,9 @@ def _walk_fraction(data: SeedData, weight: float, steering: bool) -> float | Non
     return float(np.mean(values)) if len(values) else None
 
 
-WALK_METRIC = "walking: forward base travel >= evaluate.walk_distance (base positions)"
+WALK_METRIC = (
+    "walking: forward base travel >= evaluate.walk_distance on >= 2 touchdowns (base positions)"
+)
 
 
 def _compared_walk(data: SeedData, figures: FiguresParams) -> Claim:

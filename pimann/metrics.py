@@ -54,6 +54,7 @@ from pimann.stance_phases import SHARE_METRICS, phase_share_metrics
 from pimann.trajectory import Trajectory, iter_collection, read_trajectory
 
 SIDES = ("left", "right")
+WALK_TOUCHDOWNS = 2  # a rollout walks on steps: a glide of walk_distance without them does not
 FOOT_VELOCITY_FRAMES = {
     "local_world_aligned": pin.LOCAL_WORLD_ALIGNED,  # the paper's text
     "world": pin.WORLD,  # the authors' code (inertial-fixed)
@@ -319,7 +320,8 @@ def trajectory_metrics(
         metrics[f"drift_{name}"] = float(value)
     metrics["drift_y_max_abs"] = float(np.abs(a.displacement[:, 1]).max())
     metrics["drift_yaw_max_abs"] = float(np.abs(a.angles[:, 2]).max())
-    metrics["walks"] = bool(final[0] >= params.walk_distance)
+    walked = final[0] >= params.walk_distance and metrics["touchdowns"] >= WALK_TOUCHDOWNS
+    metrics["walks"] = bool(walked)
     return metrics
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -310,8 +311,22 @@ def test_drift_of_a_straight_line_is_zero(robot):
     assert metrics["drift_x"] == pytest.approx(1.5)
     assert metrics["drift_y"] == pytest.approx(0.0, abs=1e-12)
     assert metrics["drift_yaw"] == pytest.approx(0.0, abs=1e-12)
-    assert metrics["walks"] is True
-    assert trajectory_metrics(line_trajectory(robot, distance=0.5), robot, PARAMS)["walks"] is False
+    assert metrics["touchdowns"] == 0 and metrics["walks"] is False  # 1.5 m, but a glide
+
+
+def test_walking_takes_the_distance_on_steps(robot):
+    """walks: forward travel >= walk_distance (1 m) with at least two touchdowns."""
+
+    def stepping(distance, steps):
+        trajectory = line_trajectory(robot, distance=distance)
+        contacts = np.ones((len(trajectory.time), 2), dtype=bool)
+        for k in range(steps):  # each step: one foot up for 10 frames, then down again
+            contacts[10 + 20 * k : 20 + 20 * k, k % 2] = False
+        return trajectory_metrics(dataclasses.replace(trajectory, contacts=contacts), robot, PARAMS)
+
+    assert stepping(1.5, 2)["touchdowns"] == 2 and stepping(1.5, 2)["walks"] is True
+    assert stepping(1.5, 1)["walks"] is False
+    assert stepping(0.5, 4)["walks"] is False
 
 
 def test_drift_of_a_known_offset_and_turn(robot):
