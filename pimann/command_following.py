@@ -134,7 +134,7 @@ def follow_measures(
     contacts = series[[f"{side}_contact" for side in SIDES]].to_numpy(bool)
     sliding = {
         kind: np.where(contacts, series[[f"{s}_rms_{kind}" for s in SIDES]].to_numpy(), 0.0).mean(1)
-        for kind in ("linear", "angular")
+        for kind in ("linear", "angular", "linear_position")
     }
     soles = np.stack([series[[f"{s}_sole_x", f"{s}_sole_y"]].to_numpy() for s in SIDES], 1)
     sole_speed = np.linalg.norm(np.diff(soles, axis=0), axis=-1).max(axis=1) / dt  # per step
@@ -191,6 +191,9 @@ def follow_measures(
                 "alternates": feet_alternate(counts, moving=name != STANDING),
                 "sliding_linear": PAPER_FRAMES * float(sliding["linear"][frames].mean()),
                 "sliding_angular": PAPER_FRAMES * float(sliding["angular"][frames].mean()),
+                "sliding_linear_position": (
+                    PAPER_FRAMES * float(sliding["linear_position"][frames].mean())
+                ),
                 "base_travel_m": float(travel) if stand else math.nan,
                 "base_travel_limit_m": (
                     STAND_TRAVEL_M * (b - s) * dt / STAND_TRAVEL_S if stand else math.nan
@@ -218,6 +221,7 @@ SUMMARY_MEASURES = {  # summary column: (row column, absolute value first)
     "alternation_share": ("alternates", False),
     "sliding_linear": ("sliding_linear", False),
     "sliding_angular": ("sliding_angular", False),
+    "sliding_linear_position": ("sliding_linear_position", False),
     "base_travel_m": ("base_travel_m", False),
     "base_travel_ratio": ("base_travel_ratio", False),
     "foot_speed_max": ("foot_speed_max", False),

@@ -338,7 +338,7 @@ def trajectory_time_series(
     for k, name in enumerate(("base_roll", "base_pitch", "base_yaw")):
         columns[name] = a.angles[:, k]
     heights, pitches = a.feet.heights, a.feet.pitches
-    rms_linear, rms_angular = a.rms("linear"), a.rms("angular")
+    rms = {name: a.rms(name) for name in ("linear", "angular", "linear_position")}
     for f, side in enumerate(SIDES):
         columns[f"{side}_foot_height"] = heights[:, f]
         columns[f"{side}_sole_x"] = a.feet.positions[:, f, 0]
@@ -346,8 +346,8 @@ def trajectory_time_series(
         columns[f"{side}_sole_z"] = a.feet.positions[:, f, 2]
         columns[f"{side}_sole_pitch"] = pitches[:, f]
         columns[f"{side}_contact"] = a.contacts[:, f]
-        columns[f"{side}_rms_linear"] = rms_linear[:, f]
-        columns[f"{side}_rms_angular"] = rms_angular[:, f]
+        for name, values in rms.items():
+            columns[f"{side}_rms_{name}"] = values[:, f]
         columns[f"{side}_speed_xy"] = np.linalg.norm(a.feet.velocities[:, f, :2], axis=-1)
     return pd.DataFrame(columns)
 

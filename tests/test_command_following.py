@@ -23,6 +23,7 @@ from pimann import command_following as cf
 from pimann.clip_commands import clip_commands, segment_class
 from pimann.command_following_figure import fig_command_following
 from pimann.figures import style
+from pimann.following import summary_table
 from pimann.params import MotionSegment, StandSegment, load_params
 
 DT = 1.0 / RATE
@@ -151,6 +152,9 @@ def test_follow_measures_of_an_exact_follower(exact_rows):
     # 0.3 rad/s; the finite differences halve it at the segment's last frame)
     assert rows[1]["sliding_linear"] > 0.8 * 500 / math.sqrt(3) * 0.9
     assert rows[1]["sliding_angular"] == pytest.approx(0.0, abs=1e-6)
+    # no predicted joint velocities in the file: the position level is the velocity level
+    for row in rows:
+        assert row["sliding_linear_position"] == pytest.approx(row["sliding_linear"], abs=1e-9)
     assert turning["sliding_angular"] == pytest.approx(500 * 0.3 / math.sqrt(3), rel=2e-3)
     for stand in (rows[0], rows[4]):
         assert stand["alternates"] is True
@@ -252,6 +256,7 @@ def crafted_rows() -> pd.DataFrame:
                         "heading_error_max_deg": 3.0 if good else 12.0 + seed,
                         "heading_error_final_deg": -3.0 if good else 12.0,
                         "alternates": good or seed == 0, "sliding_linear": 10.0 + seed,
+                        "sliding_linear_position": 6.0 + seed,
                         "sliding_angular": 5.0, "base_travel_m": np.nan,
                         "base_travel_limit_m": np.nan, "foot_speed_max": np.nan,
                         "roll_drift_deg": 1.0, "pitch_drift_deg": -2.0 if good else -7.0,
@@ -263,6 +268,7 @@ def crafted_rows() -> pd.DataFrame:
                     "cmd_yaw_rate": 0.5, "yaw_rate": 0.45, "yaw_rate_ratio": 0.9,
                     "heading_error_max_deg": 4.0, "heading_error_final_deg": 4.0,
                     "alternates": True, "sliding_linear": 1.0, "sliding_angular": 8.0,
+                    "sliding_linear_position": 1.0,
                     "base_travel_m": np.nan, "base_travel_limit_m": np.nan,
                     "foot_speed_max": np.nan, "roll_drift_deg": 0.5, "pitch_drift_deg": 0.5,
                     "foot_pitch_drift_deg": 0.5,
@@ -273,6 +279,7 @@ def crafted_rows() -> pd.DataFrame:
                     "cmd_yaw_rate": 0.0, "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
                     "heading_error_max_deg": 0.5, "heading_error_final_deg": 0.5,
                     "alternates": True, "sliding_linear": 0.0, "sliding_angular": 0.0,
+                    "sliding_linear_position": 0.0,
                     "base_travel_m": 0.02 if good else 0.2, "base_travel_limit_m": 0.04,
                     "foot_speed_max": 0.01, "roll_drift_deg": 0.1, "pitch_drift_deg": 0.1,
                     "foot_pitch_drift_deg": 0.1,
@@ -295,6 +302,9 @@ def test_summary_medians_and_criteria():
     # seeds' means 0.41, 0.46, 0.51: the median seed's
     assert bad["achieved_speed"] == pytest.approx(0.46)
     assert bad["sliding_linear"] == pytest.approx(11.0)
+    assert bad["sliding_linear_position"] == pytest.approx(7.0)
+    line = next(r for r in summary_table(summary) if r.startswith("| baseline | nosteering | fo"))
+    assert "| 11.0 / 7.0 (–) |" in line  # both levels; no data rows: no data level
     assert bad["alternation_share"] == 0.0  # two seeds of three never alternate
     assert bad["pitch_drift_deg"] == pytest.approx(7.0)
     for criterion in ("speed_pass", "heading_pass", "alternation_pass", "drift_pass", "passes"):
