@@ -52,7 +52,8 @@ from pimann.contacts import (
 from pimann.errors import PimannError
 from pimann.feature_layout import window_layout
 from pimann.features import clip_features, settled_contacts
-from pimann.metrics import FOOT_VELOCITY_FRAMES, manifold_velocities
+from pimann.manifold_differences import manifold_velocities
+from pimann.metrics import FOOT_VELOCITY_FRAMES
 from pimann.motion_classes import (
     BACKWARD_DEG,
     CLASSES,

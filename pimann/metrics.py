@@ -48,6 +48,7 @@ from pimann.contacts import (
     trajectory_configurations,
 )
 from pimann.errors import PimannError, about
+from pimann.manifold_differences import manifold_velocities
 from pimann.params import EvaluateParams, load_params
 from pimann.robot import Robot, load_robot
 from pimann.stance_phases import SHARE_METRICS, phase_share_metrics
@@ -59,41 +60,6 @@ FOOT_VELOCITY_FRAMES = {
     "local_world_aligned": pin.LOCAL_WORLD_ALIGNED,  # the paper's text
     "world": pin.WORLD,  # the authors' code (inertial-fixed)
 }
-
-
-def manifold_velocities(model: pin.Model, configurations: np.ndarray, time: np.ndarray):
-    """(T, nv) velocities by finite differences of q on the manifold (base twist in body frame).
-
-    Second order everywhere (also for uneven time steps): interior frames combine the tangent
-    vectors at q_k towards q_{k-1} and q_{k+1}; the ends use the three-point one-sided formula
-    (tangents at the end frame towards its two neighbours). Two frames: a plain difference.
-    """
-    n = len(configurations)
-
-    def towards(k: int, j: int) -> np.ndarray:
-        return pin.difference(model, configurations[k], configurations[j])
-
-    forward = np.array([towards(k, k + 1) for k in range(n - 1)])
-    backward = np.array([towards(k, k - 1) for k in range(1, n)])
-    steps = np.diff(time)
-    velocities = np.empty((n, model.nv))
-    if n == 2:
-        velocities[0] = forward[0] / steps[0]
-        velocities[1] = -backward[0] / steps[0]
-        return velocities
-    h_b, h_f = steps[:-1, None], steps[1:, None]
-    ahead = forward[1:] / h_f  # slope towards k+1, at frames 1..n-2
-    behind = -backward[:-1] / h_b  # slope from k-1
-    velocities[1:-1] = (h_b * ahead + h_f * behind) / (h_b + h_f)
-
-    def one_sided(near: np.ndarray, far: np.ndarray, a: float, b: float) -> np.ndarray:
-        # slope at 0 of the parabola through (0, 0), (a, near), (b, far)
-        return (near * b * b - far * a * a) / (a * b * (b - a))
-
-    first, last = steps[0], steps[-1]
-    velocities[0] = one_sided(forward[0], towards(0, 2), first, first + steps[1])
-    velocities[-1] = -one_sided(backward[-1], towards(n - 1, n - 3), last, last + steps[-2])
-    return velocities
 
 
 # the sliding metrics: name (in `support_rmse_<name>_*`) -> (part, level, representation);
@@ -274,6 +240,15 @@ def _mean_where(values: np.ndarray, mask: np.ndarray) -> float | None:
     return _finite_or_none(values[mask].mean()) if mask.any() else None
 
 
+def _joint_velocity_gap(trajectory: Trajectory, time: np.ndarray) -> float | None:
+    """RMS (rad/s) of the file's joint velocities against the joints' central differences: how
+    far the velocity level's predicted velocities are from the joints a robot would track."""
+    if trajectory.joint_velocities is None:
+        return None
+    differences = np.gradient(trajectory.joint_positions, time, axis=0)
+    return float(np.sqrt(np.mean((differences - trajectory.joint_velocities) ** 2)))
+
+
 def trajectory_metrics(
     trajectory: Trajectory, robot: Robot | None = None, params: EvaluateParams | None = None
 ) -> dict[str, Any]:
@@ -310,6 +285,7 @@ def trajectory_metrics(
     metrics["contact_fraction_right"] = float(contacts[:, 1].mean())
     metrics["double_support_fraction"] = float(contacts.all(axis=1).mean())
     metrics["touchdowns"] = int(np.sum(~contacts[:-1] & contacts[1:]))
+    metrics["joint_velocity_gap_rms"] = _joint_velocity_gap(trajectory, a.time)
     pitch = np.abs(a.feet.pitches)
     metrics["sole_pitch_max_abs"] = float(pitch.max())
     metrics["contact_sole_pitch_max_abs"] = float(pitch[contacts].max()) if contacts.any() else None

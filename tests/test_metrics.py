@@ -12,10 +12,10 @@ from conftest import EVALUATE_PARAMS, random_configuration
 
 from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
 from pimann.errors import PimannError
+from pimann.manifold_differences import manifold_velocities
 from pimann.metrics import (
     aggregate,
     in_representation,
-    manifold_velocities,
     metrics_for_file,
     trajectory_metrics,
     trajectory_time_series,
@@ -107,6 +107,7 @@ def line_trajectory(robot, heading=0.5, distance=1.5, lateral=0.0, turn=0.0, fra
 
 def test_still_support_foot_has_zero_rmse(robot):
     metrics = trajectory_metrics(stance_trajectory(robot), robot, PARAMS)
+    assert metrics["joint_velocity_gap_rms"] is None  # no joint velocities in the file
     assert metrics["contacts_source"] == "detected"
     # the left foot is in contact throughout, the right one never
     assert metrics["contact_fraction_left"] == 1.0 and metrics["contact_fraction_right"] == 0.0
@@ -228,9 +229,14 @@ def test_both_levels_agree_when_the_file_velocities_are_the_true_ones(robot):
     expected = FRAMES * 0.05 / SQRT3
     for name in ("linear", "linear_position"):
         assert metrics[f"support_rmse_{name}_left"] == pytest.approx(expected, abs=2e-2), name
-    # wrong file velocities (zero) move the velocity level only
+    # the file's velocities are the joints' derivatives: the gap is finite-difference error
+    assert metrics["joint_velocity_gap_rms"] < 0.01
+    # wrong file velocities (zero) move the velocity level only, and the gap is their RMS
+    true_velocities = trajectory.joint_velocities.copy()
     trajectory.joint_velocities = np.zeros_like(trajectory.joint_velocities)
     wrong = trajectory_metrics(trajectory, robot, PARAMS)
+    expected_gap = np.sqrt(np.mean(true_velocities**2))
+    assert wrong["joint_velocity_gap_rms"] == pytest.approx(expected_gap, rel=0.02)
     assert abs(wrong["support_rmse_linear_left"] - expected) > 1.0
     assert wrong["support_rmse_linear_position_left"] == pytest.approx(
         metrics["support_rmse_linear_position_left"], rel=1e-12
