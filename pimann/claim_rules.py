@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pimann.metrics import WALK_TOUCHDOWNS
 from pimann.rollout_layout import pi_models, select_rows
 
 HOLDS, FAILS, NOT_COMPARABLE = "holds", "does not hold", "not comparable"
@@ -32,8 +33,9 @@ RULES = [
     f"**{WITHIN_SPREAD}**: only the seed medians order as claimed (not counted as holding).",
     f"**{STANDS_STILL}**: it would hold, but some seed of a model the claim favours (the one "
     "said to slide, drift or move less) does not walk: forward base travel < "
-    "evaluate.walk_distance, or fewer than 2 touchdowns (not counted as holding). Not "
-    "applied to C6-C8 (about walking) and C9 (standing still does not pitch the feet).",
+    f"evaluate.walk_distance, or fewer than {WALK_TOUCHDOWNS} touchdowns (not counted as "
+    "holding). Not applied to C6-C8 (about walking) and C9 (standing still does not pitch "
+    "the feet).",
     "**does not hold**: the medians do not order as claimed.",
     f"C1: holds when the baseline's median is within a factor {C1_FACTOR:g} of the paper's "
     "number, both parts (angular directly; linear in the authors' world representation). C4 "

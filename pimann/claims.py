@@ -39,6 +39,7 @@ from pimann.claim_rules import (
     span,
     stands_still,
 )
+from pimann.metrics import WALK_TOUCHDOWNS
 from pimann.params import FiguresParams
 from pimann.rollout_layout import BASELINE, weight_label
 
@@ -204,7 +205,8 @@ def _walk_fraction(data: SeedData, weight: float, steering: bool) -> float | Non
 
 
 WALK_METRIC = (
-    "walking: forward base travel >= evaluate.walk_distance on >= 2 touchdowns (base positions)"
+    "walking: forward base travel >= evaluate.walk_distance on >= "
+    f"{WALK_TOUCHDOWNS} touchdowns (base positions)"
 )
 
 
