@@ -96,6 +96,22 @@ class SeedData:
         return sorted(int(s) for s in rows.loc[rows["walks"].astype(float) < 0.5, "seed"])
 
 
+def velocity_level_cause(data: SeedData, models: Sequence[tuple[str, str | None]]) -> str:
+    """Why a velocity-level sliding claim fails, measured: the same models on the position
+    level (the poses alone) and the predicted joint velocities' gap to the joints' differences,
+    seed medians of the unsteered runs; `models`: (label, model) pairs."""
+
+    def medians(metric: str) -> str:
+        return ", ".join(
+            f"{label} {fmt(data.median(model, False, metric))}" for label, model in models
+        )
+
+    return (
+        f"; position level: {medians('support_rmse_linear_position_total')}; predicted joint "
+        f"velocities off the joints (rad/s RMS): {medians('joint_velocity_gap_rms')}"
+    )
+
+
 def order(low: np.ndarray, high: np.ndarray) -> str:
     """Whether `low` < `high` over the seeds: separated ranges, medians only, or not at all."""
     if low.max() < high.min():

@@ -38,6 +38,7 @@ from pimann.claim_rules import (
     order,
     span,
     stands_still,
+    velocity_level_cause,
 )
 from pimann.metrics import WALK_TOUCHDOWNS
 from pimann.params import FiguresParams
@@ -134,7 +135,14 @@ def _lower_than_baseline(data: SeedData, figures: FiguresParams, kind: str) -> C
         else f"w={', '.join(weak)}: seed ranges overlap the baseline's"
         if status == WITHIN_SPREAD else f"w={', '.join(weak)}: median not below the baseline",
     )  # fmt: skip
+    if status != HOLDS and kind == "linear":
+        claim = dataclasses.replace(claim, reason=claim.reason + _cause(data, weights))
     return stands_still(data, claim, [(data.model(w), False) for w in weights])
+
+
+def _cause(data: SeedData, weights: Sequence[float]) -> str:
+    models = [("baseline", BASELINE)] + [(f"w={weight_label(w)}", data.model(w)) for w in weights]
+    return velocity_level_cause(data, models)
 
 
 def _reduction(data: SeedData, weights: Sequence[float], kind: str) -> float | None:
@@ -158,7 +166,8 @@ def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
         status, reason = (
             FAILS,
             "no reduction in "
-            + " and ".join(k for k, r in (("linear", linear), ("angular", angular)) if r <= 0),
+            + " and ".join(k for k, r in (("linear", linear), ("angular", angular)) if r <= 0)
+            + (_cause(data, figures.box_weights) if linear <= 0 else ""),
         )
     elif angular > linear:
         status, reason = HOLDS, "both reduced, angular more"

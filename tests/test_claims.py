@@ -183,9 +183,20 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     # every PI model slides more than the baseline linearly (-30 %), less angularly (+70 %):
     # angular "reduced more", yet there is no linear reduction
     values["support_rmse_linear_total"].update(w0=26, w1=26, w10=26, w20=26)
-    c4 = next(c for c in evaluate_claims(crafted_metrics(values), params.figures) if c.id == "C4")
+    frame = crafted_metrics(values)
+    position = (frame["model"] == "w10").map({True: 12.0, False: 30.0})
+    frame["support_rmse_linear_position_total"] = position
+    frame["joint_velocity_gap_rms"] = 0.4
+    claims = {c.id: c for c in evaluate_claims(frame, params.figures)}
+    c4 = claims["C4"]
     assert c4.status == FAILS and "no reduction in linear" in c4.reason
     assert "linear -30%" in c4.ours
+    # the failing velocity-level claims name what the position level and the joint-velocity
+    # gap measure on the same runs
+    for claim in (claims["C2"], c4):
+        assert "position level: baseline 30, w=0 30, w=1 30, w=10 12, w=20 30" in claim.reason
+        assert "off the joints (rad/s RMS): baseline 0.4, w=0 0.4" in claim.reason
+    assert "position level" not in claims["C3"].reason  # angular: holds, no cause
 
 
 def test_every_claim_names_its_metric(params):
