@@ -17,7 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pimann.metrics import WALK_TOUCHDOWNS
-from pimann.rollout_layout import pi_models, select_rows
+from pimann.rollout_layout import BASELINE, pi_models, select_rows, weight_label
 
 HOLDS, FAILS, NOT_COMPARABLE = "holds", "does not hold", "not comparable"
 WITHIN_SPREAD, STANDS_STILL = "holds within seed spread", "holds (model stands still)"
@@ -89,6 +89,11 @@ class SeedData:
     def model(self, weight: float) -> str | None:
         return self.models.get(float(weight))
 
+    def walk_fraction(self, weight: float, steering: bool) -> float | None:
+        """The share of a weight's seeds whose rollout walks (None: no rollout)."""
+        values = self.values(self.model(weight), steering, "walks")
+        return float(np.mean(values)) if len(values) else None
+
     def still_seeds(self, model: str | None, steering: bool) -> list[int]:
         if model is None or "walks" not in self.frame:
             return []
@@ -96,10 +101,11 @@ class SeedData:
         return sorted(int(s) for s in rows.loc[rows["walks"].astype(float) < 0.5, "seed"])
 
 
-def velocity_level_cause(data: SeedData, models: Sequence[tuple[str, str | None]]) -> str:
-    """Why a velocity-level sliding claim fails, measured: the same models on the position
-    level (the poses alone) and the predicted joint velocities' gap to the joints' differences,
-    seed medians of the unsteered runs; `models`: (label, model) pairs."""
+def velocity_level_cause(data: SeedData, weights: Sequence[float]) -> str:
+    """Why a velocity-level sliding claim fails, measured: the baseline and the PI `weights`
+    on the position level (the poses alone) and the predicted joint velocities' gap to the
+    joints' differences, seed medians of the unsteered runs."""
+    models = [("baseline", BASELINE)] + [(f"w={weight_label(w)}", data.model(w)) for w in weights]
 
     def medians(metric: str) -> str:
         return ", ".join(

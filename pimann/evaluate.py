@@ -254,7 +254,9 @@ def write_results(
     tidy = frame.assign(profile=info.get("profile"), epochs=info.get("epochs"))
     with atomic_path(results_dir / "metrics.csv") as tmp:
         tidy.to_csv(tmp, index=False, float_format="%.6g")
-    claims = evaluate_claims(frame, params.figures, params.evaluate.foot_velocity_frame)
+    claims = evaluate_claims(
+        frame, params.figures, params.evaluate.foot_velocity_frame, params.train.pi_gradient
+    )
     summary = {
         "provenance": info,
         "timeseries": {name: dataclasses.asdict(key) for name, key in (timeseries or {}).items()},

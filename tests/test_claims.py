@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from pimann.claims import (
+    CONFIGURATION_HELD,
     FAILS,
     HOLDS,
     NOT_COMPARABLE,
@@ -238,3 +239,18 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
     frame.loc[frame["model"] == "w100", "walks"] = True
     (c9,) = [c for c in evaluate_claims(frame, params.figures) if c.id == "C9"]
     assert c9.status == FAILS and "walks at" not in c9.reason
+    assert "holds the configuration" not in c9.reason  # the paper's pi_gradient: both
+
+
+@pytest.mark.parametrize("pi_gradient", ["both", "joints", "base", "joint_velocities"])
+def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
+    """A failing C9 says when train.pi_gradient keeps L_B's gradient off the configuration:
+    exactly the values whose training loss detaches the predicted joints."""
+    from pimann.training_loss import _HELD
+
+    values = {k: dict(v) for k, v in AGREEING.items()}
+    values["contact_sole_pitch_max_abs"].update(w100=0.01)
+    claims = evaluate_claims(crafted_metrics(values), params.figures, pi_gradient=pi_gradient)
+    (c9,) = [c for c in claims if c.id == "C9"]
+    named = f"train.pi_gradient {pi_gradient} holds the configuration" in c9.reason
+    assert named == ("joints" in _HELD[pi_gradient]) == (pi_gradient in CONFIGURATION_HELD)
