@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from pimann.data_reference import reference_value
 from pimann.metrics import WALK_TOUCHDOWNS
 from pimann.rollout_layout import BASELINE, pi_models, select_rows, weight_label
 
@@ -165,32 +166,26 @@ def data_claim(reference: dict[str, Any] | None) -> Claim | None:
     if not reference:
         return None
 
-    def level(subset: dict[str, Any], suffix: str) -> str:
-        def value(name: str) -> str:
-            stats = subset.get("metrics", {}).get(f"support_rmse_{name}_total") or {}
-            return fmt(stats.get("median"))
+    def level(name: str, suffix: str) -> str:
+        def value(metric: str) -> str:
+            return fmt(reference_value(reference, f"support_rmse_{metric}_total", name))
 
         return (
             f"linear {value('linear' + suffix)} (world {value('linear' + suffix + '_world')}), "
             f"angular {value('angular' + suffix)}"
         )
 
-    def liftoff(subset: dict[str, Any]) -> str:
-        def median(metric: str) -> str:
-            stats = subset.get("metrics", {}).get(metric) or {}
-            return fmt(stats.get("median"))
-
-        return (
-            f"; lift-off share {median('support_rmse_linear_position_liftoff_share')} (of "
-            f"{median('contact_liftoff_frames_share')} of the contact frames)"
-        )
+    def liftoff(name: str) -> str:
+        share = reference_value(reference, "support_rmse_linear_position_liftoff_share", name)
+        frames = reference_value(reference, "contact_liftoff_frames_share", name)
+        return f"; lift-off share {fmt(share)} (of {fmt(frames)} of the contact frames)"
 
     parts = []
     for name in ("all", "test"):
         subset = reference.get(name) or {}
         parts.append(
             f"{name} clips ({subset.get('used', 0)} of {subset.get('clips', 0)}): velocity level "
-            f"{level(subset, '')}; position level {level(subset, '_position')}{liftoff(subset)}"
+            f"{level(name, '')}; position level {level(name, '_position')}{liftoff(name)}"
         )
     coincide = reference.get("joint_velocities") == "differences"
     return Claim(

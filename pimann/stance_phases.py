@@ -35,6 +35,25 @@ def stance_phases(contacts: np.ndarray, edge_frames: int) -> np.ndarray:
     return labels
 
 
+def _counted_labels(contacts: np.ndarray, rate_hz: float, counted: np.ndarray | None) -> np.ndarray:
+    """`stance_phases` at `EDGE_S`, frames outside `counted` relabelled as not in contact."""
+    labels = stance_phases(contacts, max(1, round(EDGE_S * rate_hz)))
+    if counted is None:
+        return labels
+    return np.where(np.asarray(counted, dtype=bool)[:, None], labels, _NONE)
+
+
+def _shares(per_frame: np.ndarray, labels: np.ndarray) -> dict[str, float | None]:
+    values = np.where(labels != _NONE, np.asarray(per_frame, dtype=float), 0.0)
+    total, in_contact = values.sum(), int((labels != _NONE).sum())
+    shares: dict[str, float | None] = {}
+    for label, phase in enumerate(PHASES, start=_TOUCHDOWN):
+        mask = labels == label
+        shares[phase] = float(values[mask].sum() / total) if total > 0 else None
+        shares[f"{phase}_frames"] = float(mask.sum() / in_contact) if in_contact else None
+    return shares
+
+
 def phase_shares(
     per_frame: np.ndarray,
     contacts: np.ndarray,
@@ -47,17 +66,7 @@ def phase_shares(
     `counted` (T,) bool: only these frames are summed (the phases still come from the whole
     trajectory, so a class boundary is no touchdown).
     """
-    labels = stance_phases(contacts, max(1, round(EDGE_S * rate_hz)))
-    if counted is not None:
-        labels = np.where(np.asarray(counted, dtype=bool)[:, None], labels, _NONE)
-    values = np.where(labels != _NONE, np.asarray(per_frame, dtype=float), 0.0)
-    total, in_contact = values.sum(), int((labels != _NONE).sum())
-    shares: dict[str, float | None] = {}
-    for label, phase in enumerate(PHASES, start=_TOUCHDOWN):
-        mask = labels == label
-        shares[phase] = float(values[mask].sum() / total) if total > 0 else None
-        shares[f"{phase}_frames"] = float(mask.sum() / in_contact) if in_contact else None
-    return shares
+    return _shares(per_frame, _counted_labels(contacts, rate_hz, counted))
 
 
 def phase_share_metrics(
@@ -67,10 +76,12 @@ def phase_share_metrics(
     counted: np.ndarray | None = None,
 ) -> dict[str, float | None]:
     """`support_rmse_<name>_<phase>_share` of each sliding metric's (T, F) per-frame RMS, and
-    `contact_<phase>_frames_share`, as pimann.metrics and pimann.data_reference report them."""
+    `contact_<phase>_frames_share`, as pimann.metrics and pimann.data_reference report them:
+    the phases labelled once for all the metrics."""
+    labels = _counted_labels(contacts, rate_hz, counted)
     out: dict[str, float | None] = {}
     for name, values in per_frame.items():
-        shares = phase_shares(values, contacts, rate_hz, counted)
+        shares = _shares(values, labels)
         out.update({f"support_rmse_{name}_{phase}_share": shares[phase] for phase in PHASES})
-        out.update({f"contact_{phase}_frames_share": shares[f"{phase}_frames"] for phase in PHASES})
+    out.update({f"contact_{phase}_frames_share": shares[f"{phase}_frames"] for phase in PHASES})
     return out
