@@ -119,6 +119,22 @@ def velocity_level_cause(data: SeedData, weights: Sequence[float]) -> str:
     )
 
 
+# train.pi_gradient values that hold the predicted configuration out of L_B's gradient
+# (pimann.training_loss, a torch module the claims do not import; a test ties the two), the
+# way by which a large w tips the support foot onto its heel
+CONFIGURATION_HELD = ("base", "joint_velocities")
+
+
+def configuration_held_cause(pi_gradient: str) -> str:
+    """C9's cause when `pi_gradient` keeps L_B from tipping the feet ('' when it does not)."""
+    if pi_gradient not in CONFIGURATION_HELD:
+        return ""
+    return (
+        f"; train.pi_gradient {pi_gradient} holds the configuration out of L_B's gradient, "
+        "by which it would tip the feet onto their heels"
+    )
+
+
 def order(low: np.ndarray, high: np.ndarray) -> str:
     """Whether `low` < `high` over the seeds: separated ranges, medians only, or not at all."""
     if low.max() < high.min():

@@ -32,6 +32,7 @@ from pimann.claim_rules import (
     SeedData,
     claims_markdown,
     combine,
+    configuration_held_cause,
     data_claim,
     fmt,
     missing,
@@ -256,11 +257,6 @@ def _large_weight_walks(data: SeedData, figures: FiguresParams, steering: bool) 
     )
 
 
-# train.pi_gradient values that hold the predicted configuration out of L_B's gradient
-# (pimann.training_loss), the way by which a large w tips the support foot onto its heel
-CONFIGURATION_HELD = ("base", "joint_velocities")
-
-
 def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) -> Claim:
     claim = Claim(
         "C9", "Foot pitch in contact grows with w (heel-only stance at large w)",
@@ -288,11 +284,7 @@ def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) 
                     for w, f in walking.items() if f is not None and f < 1.0]  # fmt: skip
         if standing:
             reason += "; not every seed walks at " + ", ".join(standing)
-        if pi_gradient in CONFIGURATION_HELD:
-            reason += (
-                f"; train.pi_gradient {pi_gradient} holds the configuration out of L_B's "
-                "gradient, by which it would tip the feet onto their heels"
-            )
+        reason += configuration_held_cause(pi_gradient)
     return dataclasses.replace(
         claim, status=status, reason=reason,
         ours="rad: " + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items())

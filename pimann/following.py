@@ -282,8 +282,9 @@ def following_markdown(rows: pd.DataFrame, summary: pd.DataFrame, info: dict[str
         f"- heading: the largest heading error over the segment below {cf.HEADING_LIMIT_DEG:g}°;",
         f"- stand: the base moves less than {cf.STAND_TRAVEL_M * 100:g} cm per "
         f"{cf.STAND_TRAVEL_S:g} s after the settling time (stand travel ratio < 1);",
-        f"- alternation: the feet alternate (touchdowns per foot differ by at most one) in at "
-        f"least {cf.ALTERNATION_SHARE:.0%} of the segments;",
+        f"- alternation: the feet alternate (touchdowns per foot differ by at most one; a motion "
+        f"steps, each foot in a segment of two {cf.STRIDE_S:g} s strides or more) in at least "
+        f"{cf.ALTERNATION_SHARE:.0%} of the segments;",
         f"- drift: base roll, base pitch and the contact feet's pitch drift less than "
         f"{cf.DRIFT_LIMIT_DEG:g}° (last {cf.DRIFT_WINDOW_S:g} s against the first).",
         "",

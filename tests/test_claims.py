@@ -8,8 +8,8 @@ import re
 import pandas as pd
 import pytest
 
+from pimann.claim_rules import CONFIGURATION_HELD
 from pimann.claims import (
-    CONFIGURATION_HELD,
     FAILS,
     HOLDS,
     NOT_COMPARABLE,

@@ -216,6 +216,15 @@ def test_touchdowns_and_alternation_on_synthetic_contacts():
     assert not cf.feet_alternate([4, 1], moving=True)  # one foot steps, the other drags
     assert not cf.feet_alternate([0, 1], moving=True)  # a motion needs steps with both
     assert cf.feet_alternate([0, 0], moving=False)
+    # shorter than two strides, one foot's touchdown may be all a walking gait shows (the
+    # synthetic gait above: 1 s strides, its 0.8 s windows)
+    assert cf.feet_alternate([0, 1], True, 2 * cf.STRIDE_S - 0.01)
+    assert not cf.feet_alternate([0, 1], True, 2 * cf.STRIDE_S)
+    assert not cf.feet_alternate([0, 0], True, 1.0)  # but it steps
+    assert not cf.feet_alternate([2, 0], True, 1.0)
+    shares = [cf.touchdowns(contacts[k : k + 40]) for k in range(0, 160, 5)]
+    assert all(cf.feet_alternate(c, True, 0.8) for c in shares)
+    assert not all(min(c) >= 1 for c in shares)  # the stricter rule fails the gait itself
     assert cf.touchdowns(np.ones((10, 2), bool)).tolist() == [0, 0]
 
 
