@@ -25,7 +25,7 @@ WITHIN_SPREAD, STANDS_STILL = "holds within seed spread", "holds (model stands s
 REFERENCE = "reference"
 C1_FACTOR = 2.0  # C1 holds within this factor of the paper's numbers, both ways
 RMSE_FIGURE = "pi_weight_comparison"
-VELOCITY = "velocity-level sliding RMSE (the paper's)"
+VELOCITY = "velocity-level sliding RMSE (the authors')"
 POSITION = "position-level sliding RMSE"
 RULES = [
     "**holds**: the claimed order holds with the seed ranges separated, for every pair of "
@@ -41,10 +41,11 @@ RULES = [
     f"C1: holds when the baseline's median is within a factor {C1_FACTOR:g} of the paper's "
     "number, both parts (angular directly; linear in the authors' world representation). C4 "
     "and C9's trend use the seed medians.",
-    "Metrics: velocity level (the paper's) = sole velocities from the base's finite "
-    "differences and the file's predicted joint velocities, i.e. how consistent the predictions "
-    "are with still feet; position level = from finite differences of the poses alone, i.e. "
-    "how the feet of the trajectory a robot would track move. The linear part in "
+    "Metrics: velocity level (the authors' code) = sole velocities from the file's predicted "
+    "joint velocities (the data's: the joints' differences) with the base velocity that holds "
+    "the lower foot still, i.e. how the predicted velocities move the other foot while both "
+    "are down; position level = from finite differences of the poses alone, i.e. how the feet "
+    "of the trajectory a robot would track move. The linear part in "
     "evaluate.foot_velocity_frame unless it says world (the authors' inertial-fixed one); the "
     "angular part is the same in both.",
     "Row D: the retargeted data the models learn from, measured the same way "

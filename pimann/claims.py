@@ -1,6 +1,6 @@
 """The paper's claims (Sec. IV, SPEC 8) against our metrics: one row each in results/claims.md.
 
-Every claim names its metric: the velocity-level sliding RMSE (the paper's; pimann.metrics),
+Every claim names its metric: the velocity-level sliding RMSE (the authors'; pimann.metrics),
 the position-level one (the feet of the trajectory a robot would track), base poses or foot
 pitch; its status follows pimann.claim_rules (`RULES`: seed ranges must separate; a claim
 that holds only because a model stands still says so). C1 compares the baseline's magnitude

@@ -40,20 +40,15 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-import pinocchio as pin
 
 from pimann.claims import PAPER_BASELINE_RMSE
 from pimann.contacts import (
-    contacts_from_heights,
-    foot_kinematics,
     frame_period,
-    trajectory_configurations,
 )
 from pimann.errors import PimannError
 from pimann.feature_layout import window_layout
 from pimann.features import clip_features, settled_contacts
-from pimann.manifold_differences import manifold_velocities
-from pimann.metrics import FOOT_VELOCITY_FRAMES
+from pimann.metrics import analyse
 from pimann.motion_classes import (
     BACKWARD_DEG,
     CLASSES,
@@ -165,25 +160,12 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
     robot = load_robot("retarget")
     time = np.asarray(trajectory.time, dtype=float)
     dt = frame_period(trajectory)
-    configurations = trajectory_configurations(robot, trajectory)
-    velocities = manifold_velocities(robot.model, configurations, time)
-    if trajectory.joint_velocities is not None:  # as pimann.metrics does
-        velocities[:, robot.v_index] = trajectory.joint_velocities
-    feet = foot_kinematics(robot, configurations, velocities, pin.LOCAL_WORLD_ALIGNED)
-    reference = params.evaluate.foot_velocity_frame
-    if FOOT_VELOCITY_FRAMES[reference] != pin.LOCAL_WORLD_ALIGNED:
-        sliding_velocities = foot_kinematics(
-            robot, configurations, velocities, FOOT_VELOCITY_FRAMES[reference]
-        ).velocities
-    else:
-        sliding_velocities = feet.velocities
-    rms = {
-        "linear": np.sqrt(np.mean(sliding_velocities[..., :3] ** 2, axis=-1)),
-        "angular": np.sqrt(np.mean(sliding_velocities[..., 3:] ** 2, axis=-1)),
-    }
-    contacts = {"evaluate_rule": contacts_from_heights(feet.heights, dt, params.evaluate)}
+    analysis = analyse(trajectory, robot, params.evaluate, file_contacts=False)  # as evaluated
+    rms = {kind: analysis.rms(kind) for kind in ("linear", "angular")}
+    contacts = {"evaluate_rule": analysis.contacts}
     if trajectory.contacts is not None:
         contacts["file_contacts"] = np.asarray(trajectory.contacts, dtype=bool)
+    feet, moved = analysis.feet, analysis.sole_velocities["position"]  # what the soles did
 
     classes = motion_classes(trajectory)
     n = len(time)
@@ -203,7 +185,7 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
         for kind in ("linear", "angular"):
             columns[f"{kind}_{rule}"] = np.nan if flags is None else _sliding(rms[kind], flags)
         columns[f"double_{rule}"] = np.nan if flags is None else flags.all(axis=1).astype(float)
-    heights, speeds = _corner_speeds(feet.positions, feet.rotations, feet.velocities)
+    heights, speeds = _corner_speeds(feet.positions, feet.rotations, moved)
     columns["lowest_corner"] = heights.min(axis=(1, 2))
     file_flags = contacts.get("file_contacts")
     columns["flight"] = np.nan if file_flags is None else (~file_flags.any(axis=1)).astype(float)

@@ -172,11 +172,11 @@ def _table(header: list[str], lines: list[list[str]]) -> list[str]:
 
 
 def _sliding(row: pd.Series, data: pd.DataFrame) -> str:
-    """Both levels of the linear sliding, the data's own level of the class in brackets (the
-    data has no predicted joint velocities: one level)."""
-    levels = [_number(row[c], 1) for c in ("sliding_linear", "sliding_linear_position")]
-    own = data["sliding_linear"].get(row["class"]) if "sliding_linear" in data else None
-    return f"{' / '.join(levels)} ({_number(own, 1)})"
+    """Both levels of the linear sliding, the data's own levels of the class in brackets."""
+    columns = ("sliding_linear", "sliding_linear_position")
+    levels = [_number(row[c], 1) for c in columns]
+    own = [_number(data[c].get(row["class"]) if c in data else None, 1) for c in columns]
+    return f"{' / '.join(levels)} ({' / '.join(own)})"
 
 
 def summary_table(summary: pd.DataFrame) -> list[str]:
@@ -289,9 +289,10 @@ def following_markdown(rows: pd.DataFrame, summary: pd.DataFrame, info: dict[str
         f"{cf.DRIFT_LIMIT_DEG:g}° (last {cf.DRIFT_WINDOW_S:g} s against the first).",
         "",
         "Sliding: the support feet's linear RMSE per frame x 500 (the paper's 10 s test), at "
-        "the velocity level (the paper's: the predicted joint velocities) and the position "
-        "level (the poses alone: what a robot would track); the data's level of the class in "
-        "brackets (no predicted velocities: one level).",
+        "the velocity level (the authors' code: the predicted joint velocities move the feet, "
+        "the base holds the lower one still) and the position level (the poses alone: what a "
+        "robot would track); the data's levels of the class in brackets (its joint velocities: "
+        "the joints' differences).",
         "",
         *summary_table(summary),
         "",

@@ -6,16 +6,18 @@ inertial frame; summed over the trajectory per foot; left and right sums average
 RMSE"). The sum grows with the number of frames, so it compares trajectories of equal length
 and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported beside it.
 
-Two levels: the velocity level (the paper's, `support_rmse_<linear|angular>_*`) combines the
-base twist from central finite differences of q on the configuration manifold
-(`pinocchio.difference`) with the file's joint velocities (a rollout's: the network's
-predicted ones; none: the same differences), so it measures how consistent the predicted
-velocities are with a still foot; the position level (`support_rmse_<part>_position_*`) takes
-every velocity from the differences alone: whether the feet of the trajectory a robot would
-track move. The linear part in `evaluate.foot_velocity_frame`: LOCAL_WORLD_ALIGNED (the sole
-origin's velocity in world axes, the paper's text) or WORLD (inertial-fixed, the authors' code:
-the velocity of the point at the world origin, v - omega x p); the WORLD linear part is always
-reported too (`support_rmse_linear[_position]_world_*`); the angular part is the same in both.
+Two levels: the velocity level (the authors' code, `support_rmse_<linear|angular>_*`) moves
+the joints at the file's joint velocities (a rollout's: the network's predicted ones; none:
+central finite differences of the joints) and the base so that the lowest-corner foot stays
+still (pimann.support_velocity): the support sole never slides there, the other one slides as
+the joint velocities move it while both are down; the position level
+(`support_rmse_<part>_position_*`) takes every velocity, the base's too, from central finite
+differences of q on the configuration manifold (`pinocchio.difference`): whether the feet of
+the trajectory a robot would track move. The linear part in `evaluate.foot_velocity_frame`:
+LOCAL_WORLD_ALIGNED (the sole origin's velocity in world axes, the paper's text) or WORLD
+(inertial-fixed, the authors' code: the velocity of the point at the world origin,
+v - omega x p); the WORLD linear part is always reported too
+(`support_rmse_linear[_position]_world_*`); the angular part is the same in both.
 
 Foot-skating ratio (motion-generation convention, defined at 20 fps): the trajectory's sole
 positions and lowest-corner heights are linearly interpolated to `skating_rate_hz`; a pair of
@@ -52,6 +54,7 @@ from pimann.manifold_differences import manifold_velocities
 from pimann.params import EvaluateParams, load_params
 from pimann.robot import Robot, load_robot
 from pimann.stance_phases import SHARE_METRICS, phase_share_metrics
+from pimann.support_velocity import support_foot_velocities
 from pimann.trajectory import Trajectory, iter_collection, read_trajectory
 
 SIDES = ("left", "right")
@@ -87,8 +90,8 @@ def in_representation(velocities: np.ndarray, positions: np.ndarray, frame: str)
 
 
 @dataclasses.dataclass
-class _Analysis:
-    """Per-frame quantities every metric and plot is computed from."""
+class Analysis:
+    """Per-frame quantities every metric and plot is computed from (`analyse`)."""
 
     time: np.ndarray
     feet: FootKinematics  # velocities: velocity level, in the params' representation
@@ -164,29 +167,30 @@ def _check_time(trajectory: Trajectory) -> np.ndarray:
     return time
 
 
-def _analyse(
+def analyse(
     trajectory: Trajectory, robot: Robot, params: EvaluateParams, file_contacts: bool = True
-) -> _Analysis:
+) -> Analysis:
     time = _check_time(trajectory)
     configurations = trajectory_configurations(robot, trajectory)
     differences = manifold_velocities(robot.model, configurations, time)
-    velocities, joint_source = differences, "differences"
+    joint_velocities, joint_source = differences[:, robot.v_index], "differences"
     if trajectory.joint_velocities is not None:
-        velocities = differences.copy()
-        velocities[:, robot.v_index] = trajectory.joint_velocities
-        joint_source = "file"
-    feet = foot_kinematics(robot, configurations, velocities)  # LOCAL_WORLD_ALIGNED
-    levels = {"velocity": feet.velocities, "position": feet.velocities}
-    if velocities is not differences:
-        levels["position"] = foot_kinematics(robot, configurations, differences).velocities
-    feet.velocities = in_representation(feet.velocities, feet.positions, params.foot_velocity_frame)
+        joint_velocities, joint_source = np.asarray(trajectory.joint_velocities), "file"
+    feet = foot_kinematics(robot, configurations, differences)  # LOCAL_WORLD_ALIGNED
+    levels = {
+        "velocity": support_foot_velocities(robot, configurations, joint_velocities, feet.heights),
+        "position": feet.velocities,
+    }
+    feet.velocities = in_representation(
+        levels["velocity"], feet.positions, params.foot_velocity_frame
+    )
     if file_contacts and trajectory.contacts is not None:
         contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
     else:
         contacts = contacts_from_heights(feet.heights, frame_period(trajectory), params)
         contacts_source = "detected"
     displacement, angles = base_drift(trajectory)
-    return _Analysis(
+    return Analysis(
         time, feet, levels, params.foot_velocity_frame, contacts, contacts_source,
         joint_source, displacement, angles,
     )  # fmt: skip
@@ -205,7 +209,7 @@ def sliding_frames(
     """
     robot = robot or load_robot("retarget")
     params = params or load_params().evaluate
-    a = _analyse(trajectory, robot, params, file_contacts)
+    a = analyse(trajectory, robot, params, file_contacts)
     out = {name: np.where(a.contacts, a.rms(name), 0.0) for name in SLIDING}
     out["contacts"] = a.contacts
     return out
@@ -255,7 +259,7 @@ def trajectory_metrics(
     """The paper's metrics of one trajectory, as JSON-serialisable scalars (None: undefined)."""
     robot = robot or load_robot("retarget")
     params = params or load_params().evaluate
-    a = _analyse(trajectory, robot, params)
+    a = analyse(trajectory, robot, params)
     contacts = a.contacts
     metrics: dict[str, Any] = {
         "source": trajectory.source,
@@ -307,7 +311,7 @@ def trajectory_time_series(
     """Per-frame drift, foot heights, pitches, contacts and sliding, one row per frame."""
     robot = robot or load_robot("retarget")
     params = params or load_params().evaluate
-    a = _analyse(trajectory, robot, params)
+    a = analyse(trajectory, robot, params)
     columns: dict[str, np.ndarray] = {"time": a.time - a.time[0]}
     for k, name in enumerate(("base_x", "base_y", "base_z")):
         columns[name] = a.displacement[:, k]

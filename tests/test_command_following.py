@@ -148,14 +148,13 @@ def test_follow_measures_of_an_exact_follower(exact_rows):
     assert turning["settle_s"] == pytest.approx(2.0)  # 10 s command: the last 8 s count
     assert turning["yaw_rate_ratio"] == pytest.approx(1.0, abs=1e-6)
     assert (turning["vx"], turning["vy"]) == pytest.approx((0.6, 0.0), abs=1e-6)
-    # sliding: both feet down and moving with the base (the turning base spins them at
-    # 0.3 rad/s; the finite differences halve it at the segment's last frame)
-    assert rows[1]["sliding_linear"] > 0.8 * 500 / math.sqrt(3) * 0.9
-    assert rows[1]["sliding_angular"] == pytest.approx(0.0, abs=1e-6)
-    # no predicted joint velocities in the file: the position level is the velocity level
+    # sliding, position level: both feet down and gliding with the base
+    assert rows[1]["sliding_linear_position"] > 0.8 * 500 / math.sqrt(3) * 0.9
+    # velocity level: its base holds the lower foot, and the still joints carry the other
+    # with it: a rigid glide or turn does not slide there
     for row in rows:
-        assert row["sliding_linear_position"] == pytest.approx(row["sliding_linear"], abs=1e-9)
-    assert turning["sliding_angular"] == pytest.approx(500 * 0.3 / math.sqrt(3), rel=2e-3)
+        assert row["sliding_linear"] == pytest.approx(0.0, abs=1e-9)
+        assert row["sliding_angular"] == pytest.approx(0.0, abs=1e-9)
     for stand in (rows[0], rows[4]):
         assert stand["alternates"] is True
         assert stand["base_travel_m"] == pytest.approx(0.0, abs=1e-9)
@@ -163,9 +162,11 @@ def test_follow_measures_of_an_exact_follower(exact_rows):
             0.05 * (stand["duration_s"] - stand["settle_s"]) / 5.0
         )
         assert stand["foot_speed_max"] == pytest.approx(0.0, abs=1e-6)
-    assert rows[4]["sliding_linear"] == pytest.approx(0.0, abs=1e-6)
-    # the metric's central differences at the stand's last frame see half the next step
-    assert rows[0]["sliding_linear"] == pytest.approx(500 * 0.4 / math.sqrt(3) / 150, rel=1e-3)
+    assert rows[4]["sliding_linear_position"] == pytest.approx(0.0, abs=1e-6)
+    # the central differences at the stand's last frame see half the next step
+    assert rows[0]["sliding_linear_position"] == pytest.approx(
+        500 * 0.4 / math.sqrt(3) / 150, rel=1e-3
+    )
 
 
 def test_follow_measures_of_a_robot_that_stands_still(robot):
@@ -313,7 +314,7 @@ def test_summary_medians_and_criteria():
     assert bad["sliding_linear"] == pytest.approx(11.0)
     assert bad["sliding_linear_position"] == pytest.approx(7.0)
     line = next(r for r in summary_table(summary) if r.startswith("| baseline | nosteering | fo"))
-    assert "| 11.0 / 7.0 (–) |" in line  # both levels; no data rows: no data level
+    assert "| 11.0 / 7.0 (– / –) |" in line  # both levels; no data rows: no data levels
     assert bad["alternation_share"] == 0.0  # two seeds of three never alternate
     assert bad["pitch_drift_deg"] == pytest.approx(7.0)
     for criterion in ("speed_pass", "heading_pass", "alternation_pass", "drift_pass", "passes"):
