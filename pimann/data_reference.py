@@ -13,8 +13,9 @@ clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over
 Beside them, where in a stance the data slides (pimann.stance_phases: the shares of the linear
 sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
 
-The retargeted data carries no joint velocities, so its velocity and position levels coincide
-(both from finite differences of the configurations).
+The retargeted data carries no joint velocities: its velocity level takes the joints' central
+differences (and the base that holds the lower foot still), its position level the base's and
+the joints' differences alike.
 """
 
 from __future__ import annotations
