@@ -17,13 +17,12 @@ the trajectory a robot would track move. The linear part in `evaluate.foot_veloc
 LOCAL_WORLD_ALIGNED (the sole origin's velocity in world axes, the paper's text) or WORLD
 (inertial-fixed, the authors' code: the velocity of the point at the world origin,
 v - omega x p); the WORLD linear part is always reported too
-(`support_rmse_linear[_position]_world_*`); the angular part is the same in both.
+(`support_rmse_linear[_position]_world_*`); the angular part is the same in both. Both levels'
+linear part are also reported with the authors' contact rule (`*_origin_contacts_*`): the same
+trigger on the sole origin's height instead of the lowest corner's, so a sole tipped onto its
+heel or toe is not counted down.
 
-Foot-skating ratio (motion-generation convention, defined at 20 fps): the trajectory's sole
-positions and lowest-corner heights are linearly interpolated to `skating_rate_hz`; a pair of
-adjacent frames skates when some foot is below `skating_height` in both and its sole origin
-moves more than `skating_speed_per_frame` horizontally between them; the ratio is the
-fraction of pairs that skate.
+Foot-skating ratio: pimann.foot_skating.
 
 Drift: base displacement since the first frame, in the first frame's heading frame (x forward,
 y left), and changes of roll, pitch and (unwrapped) yaw since the first frame.
@@ -50,6 +49,7 @@ from pimann.contacts import (
     trajectory_configurations,
 )
 from pimann.errors import PimannError, about
+from pimann.foot_skating import skating_ratio
 from pimann.manifold_differences import manifold_velocities
 from pimann.params import EvaluateParams, load_params
 from pimann.robot import Robot, load_robot
@@ -65,15 +65,18 @@ FOOT_VELOCITY_FRAMES = {
 }
 
 
-# the sliding metrics: name (in `support_rmse_<name>_*`) -> (part, level, representation);
-# None: `evaluate.foot_velocity_frame`
+# the sliding metrics: name (in `support_rmse_<name>_*`) -> (part, level, representation,
+# contacts); representation None: `evaluate.foot_velocity_frame`; contacts "rule": the evaluate
+# rule on the lowest sole corner (or the file's flags), "origin": on the sole origin's height
 SLIDING = {
-    "linear": ("linear", "velocity", None),
-    "angular": ("angular", "velocity", None),
-    "linear_world": ("linear", "velocity", "world"),
-    "linear_position": ("linear", "position", None),
-    "angular_position": ("angular", "position", None),
-    "linear_position_world": ("linear", "position", "world"),
+    "linear": ("linear", "velocity", None, "rule"),
+    "angular": ("angular", "velocity", None, "rule"),
+    "linear_world": ("linear", "velocity", "world", "rule"),
+    "linear_position": ("linear", "position", None, "rule"),
+    "angular_position": ("angular", "position", None, "rule"),
+    "linear_position_world": ("linear", "position", "world", "rule"),
+    "linear_origin_contacts": ("linear", "velocity", None, "origin"),
+    "linear_position_origin_contacts": ("linear", "position", None, "origin"),
 }
 
 
@@ -98,6 +101,7 @@ class Analysis:
     sole_velocities: dict[str, np.ndarray]  # level -> (T, 2, 6) LOCAL_WORLD_ALIGNED
     frame: str  # evaluate.foot_velocity_frame
     contacts: np.ndarray  # (T, 2) bool
+    origin_contacts: np.ndarray  # (T, 2) bool, the trigger on the sole origins' heights
     contacts_source: str
     joint_velocities_source: str
     displacement: np.ndarray  # (T, 3) base, start heading frame
@@ -109,9 +113,13 @@ class Analysis:
             self.sole_velocities[level], self.feet.positions, frame or self.frame
         )
 
+    def contacts_of(self, name: str) -> np.ndarray:
+        """(T, 2) the contacts a `SLIDING` metric counts."""
+        return self.origin_contacts if SLIDING[name][3] == "origin" else self.contacts
+
     def rms(self, name: str) -> np.ndarray:
         """(T, 2) per-frame RMS of a `SLIDING` metric, every frame (contact or not)."""
-        part, level, frame = SLIDING[name]
+        part, level, frame, _ = SLIDING[name]
         components = slice(0, 3) if part == "linear" else slice(3, 6)
         return np.sqrt(np.mean(self.velocities(level, frame)[..., components] ** 2, axis=-1))
 
@@ -189,10 +197,13 @@ def analyse(
     else:
         contacts = contacts_from_heights(feet.heights, frame_period(trajectory), params)
         contacts_source = "detected"
+    origin_contacts = contacts_from_heights(
+        feet.positions[..., 2], frame_period(trajectory), params
+    )
     displacement, angles = base_drift(trajectory)
     return Analysis(
-        time, feet, levels, params.foot_velocity_frame, contacts, contacts_source,
-        joint_source, displacement, angles,
+        time, feet, levels, params.foot_velocity_frame, contacts, origin_contacts,
+        contacts_source, joint_source, displacement, angles,
     )  # fmt: skip
 
 
@@ -210,30 +221,9 @@ def sliding_frames(
     robot = robot or load_robot("retarget")
     params = params or load_params().evaluate
     a = analyse(trajectory, robot, params, file_contacts)
-    out = {name: np.where(a.contacts, a.rms(name), 0.0) for name in SLIDING}
+    out = {name: np.where(a.contacts_of(name), a.rms(name), 0.0) for name in SLIDING}
     out["contacts"] = a.contacts
     return out
-
-
-def skating_ratio(
-    time: np.ndarray, positions: np.ndarray, heights: np.ndarray, params: EvaluateParams
-) -> float:
-    """Fraction of adjacent frame pairs (at `skating_rate_hz`) in which some foot skates.
-
-    positions (T, 2, 3) sole origins, heights (T, 2) lowest-corner heights.
-    """
-    grid = np.arange(time[0], time[-1] + 1e-9, 1.0 / params.skating_rate_hz)
-    if len(grid) < 2:
-        return math.nan
-    feet = range(positions.shape[1])
-    xy = np.stack(
-        [np.stack([np.interp(grid, time, positions[:, f, a]) for a in (0, 1)], -1) for f in feet],
-        axis=1,
-    )  # (G, 2, 2)
-    low = np.stack([np.interp(grid, time, heights[:, f]) for f in feet], 1) < params.skating_height
-    moved = np.linalg.norm(np.diff(xy, axis=0), axis=-1) > params.skating_speed_per_frame
-    skates = low[:-1] & low[1:] & moved
-    return float(np.mean(skates.any(axis=1)))
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -271,7 +261,7 @@ def trajectory_metrics(
     }
     for name in SLIDING:
         rms = a.rms(name)
-        sums = np.where(contacts, rms, 0.0).sum(axis=0)
+        sums = np.where(a.contacts_of(name), rms, 0.0).sum(axis=0)
         for side, value in zip(SIDES, sums, strict=True):
             metrics[f"support_rmse_{name}_{side}"] = float(value)
         metrics[f"support_rmse_{name}_total"] = float(sums.mean())

@@ -21,7 +21,7 @@ from pimann.metrics import (
     trajectory_time_series,
 )
 from pimann.params import EvaluateParams
-from pimann.robot import JOINT_NAMES
+from pimann.robot import JOINT_NAMES, SOLE_HALF_LENGTH
 from pimann.trajectory import Trajectory, write_collection, write_trajectory
 
 PARAMS = EVALUATE_PARAMS
@@ -34,10 +34,12 @@ def _joint(name):
     return JOINT_NAMES.index(name)
 
 
-def stance_trajectory(robot, slide=0.0, spin=0.0, frames=FRAMES, rate=RATE, joint_velocities=False):
+def stance_trajectory(
+    robot, slide=0.0, spin=0.0, frames=FRAMES, rate=RATE, joint_velocities=False, tip=0.0
+):
     """Left foot on the floor (sliding along its x at `slide` m/s, turning about its z at
-    `spin` rad/s), the right leg swinging high, the body moving: the base comes from the sole
-    by inverse placement, base = oMsole * (baseMsole)^-1."""
+    `spin` rad/s, tipped `tip` rad onto its heel), the right leg swinging high, the body
+    moving: the base comes from the sole by inverse placement, base = oMsole * (baseMsole)^-1."""
     t = np.arange(frames) / rate
     _, _, standing = robot.split_configuration(robot.standing_configuration())
     phase = 2 * np.pi * 1.0 * t
@@ -65,9 +67,10 @@ def stance_trajectory(robot, slide=0.0, spin=0.0, frames=FRAMES, rate=RATE, join
         q_local = robot.configuration(np.zeros(3), identity, joints[k])
         base_M_sole = robot.frame_placement(q_local, FEET[0])
         world_M_sole = pin.SE3(
-            sole_rotation0 @ pin.utils.rotate("z", spin * t[k]),
-            np.array([0.3, -0.2, 0.0]) + sole_rotation0[:, 0] * slide * t[k],
-        )
+            sole_rotation0 @ pin.utils.rotate("z", spin * t[k]) @ pin.utils.rotate("y", -tip),
+            np.array([0.3, -0.2, SOLE_HALF_LENGTH * np.sin(tip)])
+            + sole_rotation0[:, 0] * slide * t[k],
+        )  # tipped: the heel's corners on the floor, the origin above it
         world_M_base = world_M_sole * base_M_sole.inverse()
         base_positions.append(world_M_base.translation)
         quaternions.append(pin.Quaternion(world_M_base.rotation).coeffs())
@@ -141,6 +144,22 @@ def test_rmse_grows_with_injected_sliding(robot):
         assert metrics["support_rmse_linear_left"] < 1e-9  # the support sole, held still
         totals.append(metrics["support_rmse_linear_position_total"])
     assert np.all(np.diff(totals) > 0)
+
+
+def test_a_sole_on_its_heel_is_down_by_the_corner_rule_only(robot):
+    """The left sole tipped 0.4 rad onto its heel, sliding: its lowest corner is on the floor
+    (the evaluate rule: down), its origin 4.6 cm above it (the authors' rule: not down)."""
+    metrics = trajectory_metrics(stance_trajectory(robot, slide=0.05, tip=0.4), robot, PARAMS)
+    series = trajectory_time_series(stance_trajectory(robot, tip=0.4), robot, PARAMS)
+    assert series["left_foot_height"].abs().max() < 1e-9
+    assert metrics["contact_fraction_left"] == 1.0
+    expected = FRAMES * 0.05 / SQRT3
+    assert metrics["support_rmse_linear_position_left"] == pytest.approx(expected, abs=0.02)
+    assert metrics["support_rmse_linear_position_origin_contacts_left"] == 0.0
+    flat = trajectory_metrics(stance_trajectory(robot, slide=0.05), robot, PARAMS)
+    assert flat["support_rmse_linear_position_origin_contacts_left"] == pytest.approx(
+        flat["support_rmse_linear_position_left"], rel=1e-12
+    )  # a flat sole: both rules agree
 
 
 def test_turning_foot_counts_in_angular_rmse(robot):
