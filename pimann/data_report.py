@@ -11,8 +11,9 @@ generated trajectories is applied here, with the same functions and contact rule
   the original clips and with their mirrors; the authors' composition (SPEC 8.1) is
   pre-mirror and label-based, so the `content` labels' minutes are given beside ours where
   clips have them.
-- Support-foot sliding (pimann.metrics: RMS over the 3 linear / 3 angular components of the
-  sole velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
+- Support-foot sliding (pimann.metrics' velocity level, the joints' differences moving the
+  feet with the lower one held: RMS over the 3 linear / 3 angular components of the sole
+  velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
   right sums averaged) with the evaluate stage's contact rule (the Schmitt trigger of
   pimann.contacts on the lowest sole corner, `evaluate.contact_*`) and with the file's own
   flags. A sum grows with the frames, so it is scaled as the paper's 10 s test: the mean per

@@ -72,7 +72,8 @@ def report_table(report: dict[str, Any]) -> str:
     lines += [
         "",
         f"Foot metrics over all clips with mirrors. Sliding: total RMSE per {PAPER_FRAMES} "
-        "frames (linear m/s, angular rad/s), with the evaluate stage's contact rule (rule) and "
+        "frames (linear m/s, angular rad/s) at the evaluate stage's velocity level (the "
+        "joints' differences move the feet, the lower one held), with its contact rule (rule) and "
         "the file's flags (file); fwd: forward-walking frames only. DS: double-support "
         f"fraction of walking frames. Glide: p{GLIDE_PERCENTILE:g} horizontal speed of sole "
         f"corners within {GLIDE_HEIGHT * 1000:g} mm of the floor (target <= {GLIDE_TARGET:g} "

@@ -178,6 +178,8 @@ def _check_time(trajectory: Trajectory) -> np.ndarray:
 def analyse(
     trajectory: Trajectory, robot: Robot, params: EvaluateParams, file_contacts: bool = True
 ) -> Analysis:
+    """Both levels' sole velocities, contacts (the file's flags, unless `file_contacts` is off
+    or there are none: the evaluate rule) and base drift of one trajectory."""
     time = _check_time(trajectory)
     configurations = trajectory_configurations(robot, trajectory)
     differences = manifold_velocities(robot.model, configurations, time)
