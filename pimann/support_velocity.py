@@ -26,7 +26,7 @@ def support_foot_velocities(
     model = robot.model
     data = model.createData()  # private: the cached Robot's data may be in use elsewhere
     frame_ids = [robot.frame_id(name) for name in FEET]
-    base = np.setdiff1d(np.arange(model.nv), robot.v_index)  # the free flyer's 6 columns
+    base = robot.velocity_order[:6]  # the free flyer's columns
     support = np.argmin(np.asarray(heights), axis=1)
     n = len(configurations)
     jacobians = np.empty((n, 2, 6, model.nv))
