@@ -43,9 +43,7 @@ import numpy as np
 import pandas as pd
 
 from pimann.claims import PAPER_BASELINE_RMSE
-from pimann.contacts import (
-    frame_period,
-)
+from pimann.contacts import frame_period
 from pimann.errors import PimannError
 from pimann.feature_layout import window_layout
 from pimann.features import clip_features, settled_contacts

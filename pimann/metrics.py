@@ -194,14 +194,12 @@ def analyse(
     feet.velocities = in_representation(
         levels["velocity"], feet.positions, params.foot_velocity_frame
     )
+    dt = frame_period(trajectory)
     if file_contacts and trajectory.contacts is not None:
         contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
     else:
-        contacts = contacts_from_heights(feet.heights, frame_period(trajectory), params)
-        contacts_source = "detected"
-    origin_contacts = contacts_from_heights(
-        feet.positions[..., 2], frame_period(trajectory), params
-    )
+        contacts, contacts_source = contacts_from_heights(feet.heights, dt, params), "detected"
+    origin_contacts = contacts_from_heights(feet.positions[..., 2], dt, params)
     displacement, angles = base_drift(trajectory)
     return Analysis(
         time, feet, levels, params.foot_velocity_frame, contacts, origin_contacts,
