@@ -118,6 +118,13 @@ class BatchGenerator:
         self.stop_step, self.blending = np.zeros(rows, dtype=int), np.zeros(rows, dtype=bool)
         self.stop_joints, self.stop_roll_pitch = self.joints.copy(), np.zeros((rows, 2))
 
+    @property
+    def base_velocity(self) -> np.ndarray:
+        """(B, 3) each row's newest linear base velocity of the history (world frame), as fed
+        back: the network's t = 0 sample after blend and steering; 0 while stopped."""
+        newest = self.history[np.arange(len(self.head)), self.head, 0]
+        return np.where(self.stopped[:, None], 0.0, newest)
+
     def desired(self, rows: np.ndarray) -> np.ndarray:
         """R_d of `rows`: the commanded heading with the standing roll and pitch."""
         return rot_z(self.desired_yaw[rows]) @ self.standing_tilt

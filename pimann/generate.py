@@ -100,6 +100,9 @@ class Rollout:
     goals: np.ndarray  # (T, 3) the goal p_d at each frame (NaN before the first command)
     stopped: np.ndarray  # (T,) bool: standing still or returning to the standing pose
     support: np.ndarray  # (T,) int: 0 left, 1 right (column of `FEET`)
+    # (T, 3) the linear base velocity fed back at each frame (world frame): the network's t = 0
+    # sample after blend and steering, 0 while stopped; the legs' odometry may not realise it
+    base_velocity: np.ndarray
 
 
 @dataclasses.dataclass(frozen=True)
@@ -143,7 +146,7 @@ def generate_batch(
     if start_joint_velocities is not None:
         generator.joint_velocities[:] = start_joint_velocities
     names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
-             "foot")  # fmt: skip
+             "foot", "base_velocity")  # fmt: skip
     n = len(plan.active)
     out = {name: np.empty((n, *np.shape(getattr(generator, name))),
                           dtype=np.asarray(getattr(generator, name)).dtype)
@@ -179,7 +182,9 @@ def generate_batch(
             joint_velocities=kept["joint_velocities"],
             attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
         )
-        rollouts.append(Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"]))
+        rollouts.append(
+            Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"], kept["base_velocity"])
+        )
     return rollouts
 
 

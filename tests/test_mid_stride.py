@@ -11,12 +11,19 @@ import torch
 from pimann.features import build_dataset, write_dataset
 from pimann.generate import RolloutSpec, generate_batch
 from pimann.mann import MANN
-from pimann.mid_stride import achieved, clip_start, sustainment
+from pimann.mid_stride import (
+    achieved,
+    clip_start,
+    leg_joint_agreement,
+    network_ratio,
+    sustainment,
+)
 from pimann.model_files import load_model, save_model
 from pimann.params import ModelParams, MotionSegment, load_params
 from pimann.standing import StandingPose
 from pimann.trajectory import write_collection
 from tests.test_features import RATE, synthetic_clip, synthetic_collection
+from tests.test_generate import GaitModel, roll
 
 
 def test_clip_start_takes_the_middle_frame_and_its_motion():
@@ -41,6 +48,38 @@ def test_achieved_speed_ratio_and_touchdowns_closed_form():
     ratio, touchdowns = achieved(clip, MotionSegment(10.0, 0.0, 0.6, 0.0))
     assert ratio == pytest.approx(0.5, abs=1e-6)
     assert touchdowns == pytest.approx(2.0 * 10.0 / clip.time[-1])  # (4 + 0) / 2 feet
+
+
+@pytest.mark.parametrize("steering", [False, True])
+def test_network_velocity_against_the_legs_tells_a_gait_stepping_in_place(robot, steering):
+    # the analytic gait echoes the commanded velocity; with stride 0 its legs step in place
+    params = load_params()
+    command = MotionSegment(6.0, 0.5, 0.0, 0.0)
+    walking = roll(GaitModel(robot), [command], params, steering, robot)
+    in_place = roll(GaitModel(robot, stride=0.0), [command], params, steering, robot)
+    assert not walking.stopped[1:].any()
+    for rollout in (walking, in_place):  # the fed-back velocity: the command, in the world
+        assert network_ratio(rollout, command) == pytest.approx(1.0, abs=0.05)
+        np.testing.assert_array_equal(rollout.base_velocity[0], 0.0)  # standing at frame 0
+    assert achieved(walking.trajectory, command)[0] == pytest.approx(1.0, abs=0.15)
+    assert abs(achieved(in_place.trajectory, command)[0]) < 0.05
+    # its joint velocities are its joints' differences: the two outputs agree
+    assert leg_joint_agreement(walking.trajectory) > 0.95
+
+
+def test_leg_joint_agreement_reads_still_joints_with_moving_velocities_as_disagreeing():
+    clip = synthetic_clip(300, velocity=(0.5, 0.0, 0.0), yaw_rate=0.0)
+    # the synthetic joints 0.2 sin(2 pi 1.1 t): their velocities in closed form
+    rate = 2 * np.pi * 1.1
+    velocities = np.repeat(0.2 * rate * np.cos(rate * clip.time)[:, None], 26, axis=1)
+    clip = dataclasses.replace(clip, joint_velocities=velocities)
+    assert leg_joint_agreement(clip) > 0.999
+    still = clip.joint_positions.copy()
+    still[:] = still[0]
+    stuck = dataclasses.replace(clip, joint_positions=still)
+    assert np.isnan(leg_joint_agreement(stuck))  # the joints do not move: no correlation
+    noisy = still + 1e-3 * np.random.default_rng(0).normal(size=still.shape)
+    assert abs(leg_joint_agreement(dataclasses.replace(clip, joint_positions=noisy))) < 0.1
 
 
 def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(tmp_path):
@@ -71,6 +110,7 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
     table = sustainment(tmp_path / "w0", collection, params, seconds=3.0)
     assert len(table) >= 1 and set(table["class"]) <= {"forward", "turning", "diagonal"}
     assert np.isfinite(table[["ratio_mid", "ratio_stand"]].to_numpy()).all()
+    assert np.isfinite(table[["network_mid", "network_stand"]].to_numpy()).all()
     assert (table["speed"] > 0.1).all()
 
 
