@@ -72,28 +72,31 @@ def achieved(trajectory: Trajectory, command: MotionSegment) -> tuple[float, flo
     """(achieved speed / commanded speed along the command after SETTLE_S, touchdowns per
     foot per 10 s, the feet averaged)."""
     velocity, _ = base_motion(trajectory)
-    settled = trajectory.time >= SETTLE_S
+    per_foot = touchdowns(trajectory.contacts).mean()
+    ratio = _ratio_along(velocity[trajectory.time >= SETTLE_S], command)
+    return ratio, float(per_foot * 10.0 / trajectory.time[-1])
+
+
+def _ratio_along(velocity: np.ndarray, command: MotionSegment) -> float:
+    """Mean of heading-frame velocities (T, 2) along the command over the command's speed."""
     wanted = np.array([command.vx, command.vy])
     speed = float(np.linalg.norm(wanted))
-    along = velocity[settled] @ (wanted / speed) if speed > 0 else np.zeros(settled.sum())
-    per_foot = touchdowns(trajectory.contacts).mean()
-    return float(along.mean()) / speed, float(per_foot * 10.0 / trajectory.time[-1])
+    along = velocity @ (wanted / speed) if speed > 0 else np.zeros(len(velocity))
+    return float(along.mean()) / speed
 
 
 def network_ratio(rollout: Rollout, command: MotionSegment) -> float:
     """The network's own base velocity along the command over the command's speed, after
     SETTLE_S (the generator's fed-back velocity, in each frame's heading frame)."""
+    if command.vx == 0 and command.vy == 0:
+        return float("nan")
     trajectory = rollout.trajectory
     settled = trajectory.time >= SETTLE_S
     yaw = yaw_of(Rotation.from_quat(trajectory.base_quaternion_xyzw[settled]).as_matrix())
     world = rollout.base_velocity[settled]
     forward = np.cos(yaw) * world[:, 0] + np.sin(yaw) * world[:, 1]
     left = -np.sin(yaw) * world[:, 0] + np.cos(yaw) * world[:, 1]
-    wanted = np.array([command.vx, command.vy])
-    speed = float(np.linalg.norm(wanted))
-    if speed == 0:
-        return float("nan")
-    return float(np.mean(np.stack([forward, left], axis=1) @ (wanted / speed))) / speed
+    return _ratio_along(np.stack([forward, left], axis=1), command)
 
 
 def leg_joint_agreement(trajectory: Trajectory) -> float:
