@@ -17,6 +17,7 @@ frames are not kept; the network is evaluated on the walking rows only.
 from __future__ import annotations
 
 import time
+from collections.abc import Sequence
 
 import numpy as np
 import torch
@@ -24,6 +25,7 @@ import torch
 from pimann.contacts import SchmittTrigger
 from pimann.errors import PimannError
 from pimann.feature_layout import FeatureLayout, Normalisation
+from pimann.features import first_differences, matrix_to_rpy
 from pimann.future_window import command_weights, next_future_matrix
 from pimann.leg_odometry import Odometry
 from pimann.params import EvaluateParams, RolloutParams
@@ -32,6 +34,7 @@ from pimann.rollout_network import RolloutNetwork
 from pimann.rotations import rot_z, yaw_of, yaw_only
 from pimann.standing import StandingPose
 from pimann.steering import exp_so3, goal_from_command, roll_pitch, rotation_rpy, steer
+from pimann.trajectory import Trajectory
 
 SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
 
@@ -43,6 +46,41 @@ def _planar(yaw: np.ndarray, vector: np.ndarray) -> np.ndarray:
     out[:, 0] = c * vector[:, 0] - s * vector[:, 1]
     out[:, 1] = s * vector[:, 0] + c * vector[:, 1]
     return out
+
+
+def data_start(
+    trajectories: Sequence[Trajectory], steps: Sequence[int], generator: BatchGenerator
+) -> None:
+    """Start `generator`'s rows inside the data: row r as if frame steps[r] - 1 of
+    trajectories[r] had just been generated (`BatchGenerator.start_in_gait` from the clip's
+    first differences, pimann.features), so that its first step builds that clip's x at
+    steps[r]."""
+    layout, length = generator.layout, generator.history_length
+    out_offsets = np.asarray(layout.output_offsets)
+    rows: list[tuple[np.ndarray, ...]] = []
+    for trajectory, k in zip(trajectories, steps, strict=True):
+        rotations, linear, angular, joint_velocities = first_differences(
+            trajectory, generator.projected
+        )
+        if k - length + 1 < 1 or k + out_offsets.max() >= len(rotations):
+            raise PimannError(trajectory.source, f"step {k} leaves no room for the windows")
+        frames = np.arange(k - length + 1, k + 1)
+        ahead = k + out_offsets
+        fed_position, fed_rpy = layout.pose(
+            trajectory.base_position[k - 1], matrix_to_rpy(rotations[: k + 1])[k - 1]
+        )
+        rows.append((
+            np.stack([linear[frames], angular[frames]], axis=1),  # (L, 2, 3), world frame
+            np.stack([linear[ahead], angular[ahead]]) @ rotations[k],  # R_k^T v, (2, F, 3)
+            trajectory.joint_positions[k - 1], joint_velocities[k - 1], fed_position, fed_rpy,
+            trajectory.base_position[k - 1], rotations[k - 1], rotations[k],
+        ))  # fmt: skip
+    history, future, joints, velocities, fed_position, fed_rpy, position, rotation, ahead = (
+        np.stack(part) for part in zip(*rows, strict=True)
+    )
+    generator.start_in_gait(
+        history, future, (joints, velocities, fed_position, fed_rpy), position, rotation, ahead
+    )
 
 
 class BatchGenerator:
@@ -99,6 +137,10 @@ class BatchGenerator:
         first = np.zeros((rows, 3))
         first[:, 2] = -lowest.min(axis=(1, 2))
         self.position, _, self.foot = self.odometry.place(self.rotation, self.joints, first)
+        # R_{k+1} = R_k exp(omega dt) from the walking rows' last prediction: y_k's window is of
+        # frame k + 1, its sample at offset 0 the base motion from frame k to k + 1
+        self.next_rotation = self.rotation.copy()
+        self.contact_params = contact_params
         self.trigger = SchmittTrigger.from_params(contact_params, self.dt, np.ones((rows, 2), bool))
         self.contacts = self.trigger.state
         # the network's side: velocity history (world frame; (linear, angular) per sample) and
@@ -117,6 +159,50 @@ class BatchGenerator:
         self.stopped, self.stand_since = np.ones(rows, dtype=bool), np.zeros(rows, dtype=int)
         self.stop_step, self.blending = np.zeros(rows, dtype=int), np.zeros(rows, dtype=bool)
         self.stop_joints, self.stop_roll_pitch = self.joints.copy(), np.zeros((rows, 2))
+
+    def start_in_gait(
+        self,
+        history: np.ndarray,
+        future: np.ndarray,
+        state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        position: np.ndarray,
+        rotation: np.ndarray,
+        next_rotation: np.ndarray,
+    ) -> None:
+        """Every row walking from inside a gait, as if frame k - 1 had just been generated.
+
+        `history` (B, L, 2, 3): linear and angular base velocities of frames k - L + 1 .. k
+        (oldest first, world frame, L >= the input window's past span + 1); `future` (B, 2,
+        F_out, 3): the window of frame k at the output offsets, in the base frame at k (what
+        y_{k-1} predicts); `state`: joints, joint velocities, base position and roll-pitch-yaw
+        at k - 1 as the network sees them (its fed-back pose); `position`, `rotation`: the base
+        pose at k - 1, `next_rotation`: at k. pimann.teacher_forcing and the oracle test start
+        rollouts of the data's own outputs this way.
+        """
+        rows, length = len(self.head), history.shape[1]
+        if length < self.history_length:
+            raise PimannError(None, f"a history of {length} frames; the window needs "
+                              f"{self.history_length}")  # fmt: skip
+        self.history = np.ascontiguousarray(history[:, -self.history_length :], dtype=float)
+        self.head = np.full(rows, self.history_length - 1)
+        self.future = np.array(future, dtype=float)
+        joints, joint_velocities, fed_position, fed_rpy = state
+        self.joints = np.array(joints, float)
+        self.joint_velocities = np.array(joint_velocities, float)
+        self.fed_position, self.fed_rpy = np.array(fed_position, float), np.array(fed_rpy, float)
+        self.rotation = np.array(rotation, float)
+        self.next_rotation = np.array(next_rotation, float)
+        self.heading = yaw_of(self.rotation)
+        self.yaw = self.heading.copy()
+        self.position, heights, self.foot = self.odometry.place(
+            self.rotation, self.joints, np.array(position, float)
+        )
+        self.trigger = SchmittTrigger.from_params(
+            self.contact_params, self.dt, heights <= self.contact_params.contact_on_height
+        )
+        self.contacts = self.trigger.state
+        self.stopped[:] = False
+        self.desired_yaw, self.last_position = self.yaw.copy(), self.position.copy()
 
     @property
     def base_velocity(self) -> np.ndarray:
@@ -216,12 +302,13 @@ class BatchGenerator:
         yaw = yaw_of(self.rotation[rows])
         rotation[rows] = rotation_rpy(roll_pitch[:, 0], roll_pitch[:, 1], yaw)
 
-    def _inputs(self, rows: np.ndarray | slice, index: np.ndarray) -> np.ndarray:
-        """x of the walking rows: velocity windows, joints, fed-back pose."""
+    def _inputs(self, rows: np.ndarray | slice, index: np.ndarray, base: np.ndarray) -> np.ndarray:
+        """x of the walking rows (base orientations `base`, R_k): velocity windows in the base
+        frame, joints, fed-back pose."""
         xs, n = self.xs, len(index)
         x = np.empty((n, self.input_dim))
         taken = (self.head[index, None] + self.past_offsets) % self.history_length
-        past = self.history[index[:, None], taken] @ self.rotation[rows, None]  # v -> R^T v
+        past = self.history[index[:, None], taken] @ base[:, None]  # v -> R^T v
         future = self.future_matrix @ self.future[rows]  # (n, 2, F, 3)
         cut = 3 * len(self.past_offsets)
         for block, part in (("base_linear_window", 0), ("base_angular_window", 1)):
@@ -238,11 +325,11 @@ class BatchGenerator:
         """One network step of the walking rows: prediction, blend, steering, orientation."""
         ys, now, n = self.ys, self.current, len(index)
         rows = slice(None) if n == len(self.y) else index  # every row: views, not copies
-        x = self._inputs(rows, index)
+        base = self.next_rotation[rows]  # R_k, from the previous prediction
+        x = self._inputs(rows, index, base)
         self._lap("inputs")
         y = self.y[rows] = self.network(x)
         self._lap("network")
-        base = self.rotation[rows]
         command_world = np.zeros((n, 3))
         command_world[:, :2] = _planar(yaw_of(base), velocity[rows])
         command_linear = command_world[:, None] @ base  # R^T v, (n, 1, 3)
@@ -265,14 +352,16 @@ class BatchGenerator:
             linear, angular = linear_c, angular_c
         self.future[rows, 0], self.future[rows, 1] = linear, angular
         self._lap("steering")
+        rotation[rows] = base
+        ahead = base @ exp_so3(angular[:, now] * self.dt)  # R_{k+1}
+        ahead = self.next_rotation[rows] = yaw_only(ahead) if self.projected else ahead
         head = self.head[rows] = (self.head[rows] + 1) % self.history_length
         now_velocity = np.empty((n, 2, 3))
         now_velocity[:, 0], now_velocity[:, 1] = linear[:, now], angular[:, now]
-        self.history[index, head] = now_velocity @ np.swapaxes(base, 1, 2)  # R v, world frame
+        # in the base frame at k + 1 (as the features write it); kept in the world frame
+        self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)  # R v
         self.joints[rows] = y[:, ys["joints"]]
         self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
-        new_rotation = base @ exp_so3(angular[:, now] * self.dt)
-        rotation[rows] = yaw_only(new_rotation) if self.projected else new_rotation
 
     def _lap(self, section: str) -> None:
         """Charge the time since the previous lap to `section` (a few 0.1 us a call)."""
@@ -292,6 +381,10 @@ class BatchGenerator:
         self._lap("commands")
         if len(walking):
             self._walking(walking, velocity, yaw_rate, rotation)
+        if len(walking) < len(rotation):  # a row that restarts turns from where it stands
+            still = np.ones(len(rotation), dtype=bool)
+            still[walking] = False
+            self.next_rotation[still] = rotation[still]
         heading = yaw_of(rotation)
         turn = heading - self.heading
         self.yaw, self.heading = self.yaw + np.arctan2(np.sin(turn), np.cos(turn)), heading

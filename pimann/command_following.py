@@ -28,7 +28,8 @@ last frame of segment i - 1, to its last frame):
   each), deg.
 
 `summarise_following` takes medians over seeds (each seed's segments of a class averaged
-first) per model, steering and class, and applies the issue's criteria to them.
+first) per model, split (where the rows have one), steering and class, and applies the issue's
+criteria to them.
 """
 
 from __future__ import annotations
@@ -263,10 +264,12 @@ def _criteria(row: pd.Series) -> dict[str, bool | None]:
 
 
 def summarise_following(rows: pd.DataFrame) -> pd.DataFrame:
-    """Medians over seeds per model, steering and class (module docstring), and the criteria.
+    """Medians over seeds per model, split, steering and class (module docstring), and the
+    criteria.
 
     `rows`: `follow_measures` rows with columns `model`, `steering`, `seed` (and optionally
-    `pi_weight`, `variant`, carried along). A seed's segments of a class are averaged first.
+    `pi_weight`, `variant`, carried along, and `split`, kept apart). A seed's segments of a
+    class are averaged first.
     """
     missing = [c for c in ("model", "steering", "seed", "class") if c not in rows]
     if missing:
@@ -280,7 +283,8 @@ def summarise_following(rows: pd.DataFrame) -> pd.DataFrame:
         if absolute:
             rows[f"_abs_{column}"] = rows[column].abs()
             columns[name] = f"_abs_{column}"
-    keys = [c for c in ("model", "variant", "pi_weight") if c in rows] + ["steering", "class"]
+    keys = [c for c in ("model", "variant", "pi_weight", "split") if c in rows]
+    keys += ["steering", "class"]
     values = sorted(set(columns.values()))
     per_seed = rows.groupby([*keys, "seed"], sort=False, dropna=False)[values].mean()
     segments = rows.groupby(keys, sort=False, dropna=False).size()
@@ -296,5 +300,6 @@ def summarise_following(rows: pd.DataFrame) -> pd.DataFrame:
     models = {name: k for k, name in enumerate(dict.fromkeys(rows["model"]))}
     classes = {name: k for k, name in enumerate(CLASSES)}
     summary = summary.assign(_m=summary["model"].map(models), _c=summary["class"].map(classes))
-    summary = summary.sort_values(["_m", "steering", "_c"], kind="stable")
+    order = ["_m", *(["split"] if "split" in summary else []), "steering", "_c"]
+    summary = summary.sort_values(order, kind="stable")
     return summary.drop(columns=["_m", "_c"]).reset_index(drop=True)

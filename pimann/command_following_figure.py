@@ -5,8 +5,9 @@ condition (unsteered above), bars of the achieved speed along the command (media
 per model and class, the commanded speed as a black tick over each bar and the +-25% criterion
 as a grey band behind it (whiskers of adjacent bars ran together into a comb). Turning in place
 is left out (no planar command: its yaw rate is in the table), as is standing (the stand
-criterion is a distance). Single IEEE column, legend above the panels (the profile footer sits
-in the lower corner).
+criterion is a distance), and so is the training split where the table has one (the held-out
+split is the benchmark; the table carries both). Single IEEE column, legend above the panels
+(the profile footer sits in the lower corner).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from matplotlib.patches import Patch
 from pimann.command_following import SPEED_TOLERANCE
 from pimann.motion_classes import CLASSES
 from pimann.params import FiguresParams
+from pimann.rollout_layout import HELD_OUT
 
 PLOTTED_CLASSES = tuple(c for c in CLASSES if c not in ("turning_in_place", "standing"))
 STEERING_TITLES = {False: "no steering", True: "steering"}
@@ -60,6 +62,8 @@ def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figu
     Draw it inside `matplotlib.rc_context(pimann.figures.style(figures))` as the other figures.
     """
     table = summary[summary["class"].isin(PLOTTED_CLASSES)]
+    if "split" in table:
+        table = table[table["split"] == HELD_OUT]
     if table.empty:
         return None
     classes = [c for c in PLOTTED_CLASSES if c in set(table["class"])]

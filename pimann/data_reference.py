@@ -84,7 +84,8 @@ def data_reference(
     sources = [t.source for _, t in clips]
     test = set()
     if len(set(sources)) >= 2:
-        test = split_sources(sources, params.features.test_fraction, params.features.split_seed)
+        features = params.features
+        test = split_sources([t for _, t in clips], features.test_fraction, features.split_seed)
     jobs = [(t, params.evaluate) for _, t in clips]
     rows = pool_map(_job, jobs, workers, "data reference")
     return {

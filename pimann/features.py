@@ -1,13 +1,16 @@
 """Training features (SPEC 4, paper Eqs. nn_input and nn_output) and the leak-free split.
 
-Step i of a clip gives one sample. The input x_i holds the base linear and angular velocities
-at the input window's offsets around i, each rotated into the base frame at i (the window
-centre), then s_{i-1}, sdot_{i-1}, p_{i-1}, psi_{i-1}; the output y_i holds the velocities at
-the output window's offsets from i (base frame at i), then s_i, sdot_i, p_i, psi_i. Both
-windows come from params as seconds (the authors' and the paper's differ only there), so one
-function serves both. Velocities are finite differences at the data rate; psi are Tait-Bryan
-angles in pinocchio's convention (R = Rz(yaw) Ry(pitch) Rx(roll)), yaw unwrapped along a clip
-so that it is continuous. Steps whose windows leave the clip are dropped.
+Step i of a clip gives one sample, as the authors' code builds it. The input x_i holds the base
+linear and angular velocities at the input window's offsets around frame i, each rotated into
+the base frame at i, then s_{i-1}, sdot_{i-1}, p_{i-1}, psi_{i-1}; the output y_i holds the
+velocities at the output window's offsets from frame i + 1, rotated into the base frame at
+i + 1, then s_i, sdot_i, p_i, psi_i. So y_i's window is the next input's window at the output
+offsets (no output column copies an input column) and its sample at offset 0 is the base motion
+from frame i to i + 1: the network generates the base motion. Velocities are first differences
+at the data rate (`first_differences`), so s_i = s_{i-1} + dt sdot_i holds in every pair. Both
+windows come from params as seconds (the authors' and the paper's differ only there); psi are
+Tait-Bryan angles in pinocchio's convention (R = Rz(yaw) Ry(pitch) Rx(roll)), yaw unwrapped
+along a clip. Steps whose windows leave the clip are dropped.
 
 The `ground_projected` variant (the ADHERENT baseline) replaces the base orientation by its
 yaw alone (roll and pitch 0) before anything is computed; the base position, z included, is
@@ -35,6 +38,7 @@ from scipy.spatial.transform import Rotation
 from pimann.atomic import atomic_path
 from pimann.errors import PimannError, about, require_finite
 from pimann.feature_layout import FeatureLayout, Normalisation, window_layout
+from pimann.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 from pimann.params import FeaturesParams
 from pimann.rotations import yaw_only
 from pimann.standing import data_standing
@@ -51,64 +55,119 @@ def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:
     return np.stack([roll, pitch, yaw], axis=1)
 
 
-def world_angular_velocity(rotations: np.ndarray, dt: float) -> np.ndarray:
-    """(T,3) angular velocity in the world frame: central differences on SO(3), one-sided ends.
+def first_differences(
+    trajectory: Trajectory, projected: bool = False
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(rotations (T,3,3), linear (T,3), angular (T,3), joint velocities (T,nj)) of a clip.
 
-    log(R_{t+1} R_{t-1}^T) / (2 dt) is exact for a constant world angular velocity.
+    Velocities are first differences ending at each frame, as the authors' features: v_t =
+    (p_t - p_{t-1}) / dt, omega_t = log(R_t R_{t-1}^T) / dt (world frame), sdot_t = (s_t -
+    s_{t-1}) / dt, so that s_t = s_{t-1} + dt sdot_t and R_t = R_{t-1} exp(R_t^T omega_t dt)
+    hold exactly: what the rollout integrates (pimann.batch_generate). Frame 0 has no
+    difference: NaN. `projected`: the base orientation kept to its yaw (the baseline's frame).
     """
-    rot = Rotation.from_matrix(rotations)
-    omega = np.empty((len(rotations), 3))
-    omega[1:-1] = (rot[2:] * rot[:-2].inv()).as_rotvec() / (2 * dt)
-    omega[0] = (rot[1] * rot[0].inv()).as_rotvec() / dt
-    omega[-1] = (rot[-1] * rot[-2].inv()).as_rotvec() / dt
-    return omega
+    dt = 1.0 / trajectory.rate_hz
+    rotations = Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()
+    if projected:
+        rotations = yaw_only(rotations)
+    position = np.asarray(trajectory.base_position, dtype=float)
+    joints = np.asarray(trajectory.joint_positions, dtype=float)
+    linear = np.full(position.shape, np.nan)
+    angular = np.full(position.shape, np.nan)
+    joint_velocities = np.full(joints.shape, np.nan)
+    if len(position) > 1:
+        linear[1:] = np.diff(position, axis=0) / dt
+        rot = Rotation.from_matrix(rotations)
+        angular[1:] = (rot[1:] * rot[:-1].inv()).as_rotvec() / dt
+        joint_velocities[1:] = np.diff(joints, axis=0) / dt
+    return rotations, linear, angular, joint_velocities
 
 
 def clip_features(
     trajectory: Trajectory, layout: FeatureLayout
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(X (N, in), Y (N, out), steps (N,)) of one clip, unnormalised, physical units."""
+    """(X (N, in), Y (N, out), steps (N,)) of one clip, unnormalised, physical units.
+
+    x_i: the input window of frame i in the base frame at i, then the state at i - 1; y_i: the
+    output window of frame i + 1 in the base frame at i + 1, then the state at i (the authors'
+    compute_X and compute_Y). y_i's window is x_{i+1}'s at the output offsets: the network
+    predicts the next frame's base velocity and the window one frame ahead.
+    """
     n = len(trajectory)
-    if n < 2:
-        return np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty(0, int)
-    dt = 1.0 / trajectory.rate_hz
-    rotations = Rotation.from_quat(trajectory.base_quaternion_xyzw).as_matrix()
-    if layout.variant == "ground_projected":
-        rotations = yaw_only(rotations)
+    none = np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty(0, int)
+    if n < 3:
+        return none
+    rotations, linear, angular, joint_velocities = first_differences(
+        trajectory, layout.variant == "ground_projected"
+    )
     position = trajectory.base_position
     joints = trajectory.joint_positions
     rpy = matrix_to_rpy(rotations)
-    linear = np.gradient(position, dt, axis=0, edge_order=1)
-    angular = world_angular_velocity(rotations, dt)
-    joint_velocities = np.gradient(joints, dt, axis=0, edge_order=1)
 
-    offsets = layout.input_offsets + layout.output_offsets
-    first, last = max(1, -min(offsets)), n - 1 - max(offsets)
+    # every velocity used is a difference (index >= 1), sdot_{i-1} included
+    first = max(2, 1 - min(layout.input_offsets))
+    last = n - 1 - max(max(layout.input_offsets), 1 + max(layout.output_offsets))
     steps = np.arange(first, last + 1)
     if len(steps) == 0:
-        return np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), steps
+        return none
 
-    centre_t = rotations[steps].transpose(0, 2, 1)  # base <- world at step i
-
-    def window(velocity: np.ndarray, window_offsets: tuple[int, ...]) -> np.ndarray:
-        """(N, 3 k) velocities at steps + offsets, written in the base frame at each step."""
-        at = velocity[steps[:, None] + np.asarray(window_offsets)[None, :]]  # (N, k, 3)
-        return np.einsum("nij,nkj->nki", centre_t, at).reshape(len(steps), -1)
+    def window(
+        velocity: np.ndarray, centre: np.ndarray, window_offsets: tuple[int, ...]
+    ) -> np.ndarray:
+        """(N, 3 k) velocities at centre + offsets, written in the base frame at each centre."""
+        at = velocity[centre[:, None] + np.asarray(window_offsets)[None, :]]  # (N, k, 3)
+        to_base = rotations[centre].transpose(0, 2, 1)  # base <- world at the centre
+        return np.einsum("nij,nkj->nki", to_base, at).reshape(len(centre), -1)
 
     def state(at: np.ndarray) -> list[np.ndarray]:
         return [joints[at], joint_velocities[at], *layout.pose(position[at], rpy[at])]
 
+    inputs, outputs = layout.input_offsets, layout.output_offsets
     x = np.concatenate(
-        [window(linear, layout.input_offsets), window(angular, layout.input_offsets)]
-        + state(steps - 1),
+        [window(linear, steps, inputs), window(angular, steps, inputs)] + state(steps - 1),
         axis=1,
     )
+    ahead = steps + 1
     y = np.concatenate(
-        [window(linear, layout.output_offsets), window(angular, layout.output_offsets)]
-        + state(steps),
+        [window(linear, ahead, outputs), window(angular, ahead, outputs)] + state(steps),
         axis=1,
     )
     return x, y, steps
+
+
+REVERSED_SUFFIX = "~reversed"  # a time-reversed clip's name: its original's and this
+
+
+def time_reversed(trajectory: Trajectory) -> Trajectory:
+    """The clip played backward: every frame in reverse order on the same clock, contacts
+    reversed (touchdowns become lift-offs), the source kept (the split keeps it beside its
+    original). Joint velocities are not carried: the features take differences."""
+    return Trajectory(
+        time=np.asarray(trajectory.time, dtype=float),
+        base_position=np.ascontiguousarray(trajectory.base_position[::-1]),
+        base_quaternion_xyzw=np.ascontiguousarray(trajectory.base_quaternion_xyzw[::-1]),
+        joint_positions=np.ascontiguousarray(trajectory.joint_positions[::-1]),
+        source=trajectory.source,
+        rate_hz=trajectory.rate_hz,
+        contacts=None if trajectory.contacts is None else trajectory.contacts[::-1].copy(),
+        attrs={**(trajectory.attrs or {}), "time_reversed": True},
+    )
+
+
+def with_time_reversed(
+    clips: Sequence[tuple[str, Trajectory]], classes: Sequence[str], test_sources: set[str]
+) -> list[tuple[str, Trajectory]]:
+    """The clips, then each training clip whose class (`majority_class`) is in `classes` played
+    backward (`time_reversed`) as `<name>~reversed`; test clips are never reversed."""
+    if not classes:
+        return list(clips)
+    added = [
+        (f"{name}{REVERSED_SUFFIX}", time_reversed(t))
+        for name, t in clips
+        if t.source not in test_sources and majority_class(class_counts(t)) in classes
+    ]
+    log.info("time-reversed %d training clips of classes %s", len(added), list(classes))
+    return [*clips, *added]
 
 
 def settled_contacts(contacts: np.ndarray, margin: int) -> np.ndarray:
@@ -123,16 +182,44 @@ def settled_contacts(contacts: np.ndarray, margin: int) -> np.ndarray:
     return ndimage.binary_erosion(contacts, structure, border_value=1)
 
 
-def split_sources(sources: Iterable[str], test_fraction: float, seed: int) -> set[str]:
-    """The source clips held out for testing: a seeded shuffle of the sorted unique names."""
-    unique = sorted(set(sources))
+PURE_SHARE = 0.75  # of a source's frames in its class: held out before the others
+
+
+def split_sources(clips: Iterable[Trajectory], test_fraction: float, seed: int) -> set[str]:
+    """The source clips held out for testing, stratified by motion class so that every class
+    is tested on takes the model never saw: a class of 4 or more sources holds out 2 (of 2-3:
+    1), of different styles where the labels name them (attrs["style"]); a seeded shuffle of
+    the sorted unique names orders each class's and fills the rest of `test_fraction`.
+
+    A source's class: pimann.motion_classes.majority_class of its clips' frames pooled.
+    """
+    counts: dict[str, np.ndarray] = {}
+    styles: dict[str, str | None] = {}
+    for trajectory in clips:
+        source = trajectory.source
+        counts[source] = counts.get(source, 0) + class_counts(trajectory)
+        styles.setdefault(source, str(trajectory.attrs.get("style") or "") or None)
+    unique = sorted(counts)
     if not 0.0 < test_fraction < 1.0:
         raise PimannError(None, f"features.test_fraction must be in (0, 1), not {test_fraction}")
     if len(unique) < 2:
         raise PimannError(None, f"need at least 2 source clips to split, got {len(unique)}")
     n_test = min(len(unique) - 1, max(1, int(round(test_fraction * len(unique)))))
-    order = np.random.default_rng(seed).permutation(len(unique))
-    return {unique[k] for k in order[:n_test]}
+    order = [unique[k] for k in np.random.default_rng(seed).permutation(len(unique))]
+    classes = {source: majority_class(counts[source]) for source in unique}
+    test: list[str] = []
+    for name in sorted(set(classes.values()), key=CLASSES.index):
+        # sources that walk mostly in their class first (a crab walk is forward by majority,
+        # but tells little about forward walking), in the shuffle's order
+        code = CLASSES.index(name)
+        members = sorted(
+            (source for source in order if classes[source] == name),
+            key=lambda source: counts[source][code] < PURE_SHARE * counts[source].sum(),
+        )
+        least = 2 if len(members) >= 4 else 1 if len(members) >= 2 else 0
+        test += spread_pick(members, styles, least)
+    test += [source for source in order if source not in test][: max(0, n_test - len(test))]
+    return set(test)
 
 
 @dataclasses.dataclass
@@ -175,9 +262,10 @@ def build_dataset(
     if len(rates) != 1:
         raise PimannError(params.input, f"clips have different rates {sorted(rates)} Hz")
     layout = window_layout(params, rates.pop(), variant)
+    test_sources = split_sources([t for _, t in clips], params.test_fraction, params.split_seed)
+    clips = with_time_reversed(clips, params.time_reversed, test_sources)
     names = [name for name, _ in clips]
     sources = [t.source for _, t in clips]
-    test_sources = split_sources(sources, params.test_fraction, params.split_seed)
     with_contacts = all(t.contacts is not None for _, t in clips)
     if not with_contacts:
         log.info("not every clip has contacts: the dataset carries none")

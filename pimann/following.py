@@ -3,15 +3,19 @@ command_following.csv, command_following.md and command_following.png.
 
 Every rollout (layout: pimann.rollout_layout) is measured against the script it ran (its
 attrs["script"]) by pimann.command_following.follow_measures, one row per script segment, keyed
-by model, variant, pi_weight, seed, scenario, steering and `kind`: `scenario` (a named scenario
-of rollout.scenarios) or `clip` (the benchmark script of a test clip, `clip_<clip name>`). The
-data's own level: each test clip of the features stage's split measured against its own script
-(model `data`, no steering, seed 0). Beside the segment's measures each row carries its
-rollout's final base displacement and the script's, in the start heading frame
+by model, variant, pi_weight, seed, scenario, steering, `kind`: `scenario` (a named scenario
+of rollout.scenarios) or `clip` (the benchmark script of a test clip, `clip_<clip name>`, or of
+a training clip, `train_<clip name>`) and `split` (pimann.rollout_layout.scenario_split:
+`training` for a training clip's script, `held_out` for the rest, whose commands no training
+clip gave). The data's own level: each benchmark clip (pimann.benchmark_clips) measured
+against its own script (model `data`, no steering, seed 0). Beside the segment's measures each
+row carries its rollout's final base displacement and the script's, in the start heading frame
 (`rollout_dx_m`, `rollout_dy_m`, `script_dx_m`, `script_dy_m`).
 
-command_following.md: `summarise_following`'s table (medians over seeds per model, steering and
-class; named scenarios and clip scripts both count), then a short table of the named scenarios
+command_following.md: `summarise_following`'s table (medians over seeds per model, split,
+steering and class; on the held-out split named scenarios and test-clip scripts both count;
+a class failing on both splits is a motion the model cannot make, on the held-out one alone a
+take it does not generalise to), then a short table of the named scenarios
 per model and steering.
 """
 
@@ -30,7 +34,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann import command_following as cf
 from pimann.atomic import atomic_path, write_text_atomic
-from pimann.benchmark_clips import held_out_clips
+from pimann.benchmark_clips import benchmark_clips
 from pimann.clip_commands import clip_commands
 from pimann.command_script import scenario_steps
 from pimann.parallel import pool_map
@@ -38,19 +42,21 @@ from pimann.params import Params, StandSegment
 from pimann.robot import load_robot
 from pimann.rollout_layout import (
     BASELINE,
+    HELD_OUT,
     STEERING_LABEL,
-    clip_scenario,
+    TRAINING,
     find_rollouts,
     is_clip,
     read_script,
     rollout_columns,
+    scenario_split,
 )
 from pimann.rotations import yaw_of
 
 log = logging.getLogger(__name__)
 
 DATA_MODEL = "data"  # the data's own rows
-KEY_COLUMNS = ["model", "variant", "pi_weight", "seed", "scenario", "steering", "kind"]
+KEY_COLUMNS = ["model", "variant", "pi_weight", "seed", "scenario", "steering", "kind", "split"]
 NAME = "command_following"
 
 
@@ -111,7 +117,7 @@ def collect_following(
     rollouts_dir: str | Path, params: Params, workers: int = 2, data: str | Path | None = None
 ) -> pd.DataFrame:
     """Every segment row of every rollout, and (`data`: a retargeted collection) the data's
-    own rows: its test clips against their own scripts."""
+    own rows: its benchmark clips (test and training) against their own scripts."""
 
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
@@ -122,16 +128,18 @@ def collect_following(
         rollouts, rollout_columns(root, rollouts), results, strict=True
     ):
         rollout = columns.pop("rollout")  # "kind" before it, as the data rows have it
-        columns.update(kind="clip" if is_clip(key.scenario) else "scenario", rollout=rollout)
+        kind = "clip" if is_clip(key.scenario) else "scenario"
+        columns.update(kind=kind, split=scenario_split(key.scenario), rollout=rollout)
         rows += [{**columns, **row} for row in measures]
     if data is not None:
-        clips = held_out_clips(data, params)
-        results = pool_map(_data_job, [(t, params) for _, t in clips], workers, "data following")
-        for (name, _), measures in zip(clips, results, strict=True):
+        clips = benchmark_clips(data, params)
+        jobs = [(clip.trajectory, params) for clip in clips]
+        results = pool_map(_data_job, jobs, workers, "data following")
+        for clip, measures in zip(clips, results, strict=True):
             keys = {
                 "model": DATA_MODEL, "variant": DATA_MODEL, "pi_weight": math.nan, "seed": 0,
-                "scenario": clip_scenario(name), "steering": False, "kind": "clip",
-                "rollout": f"{Path(data).name}:{name}",
+                "scenario": clip.scenario, "steering": False, "kind": "clip",
+                "split": clip.split, "rollout": f"{Path(data).name}:{clip.name}",
             }  # fmt: skip
             rows += [{**keys, **row} for row in measures]
     frame = pd.DataFrame(rows)
@@ -171,19 +179,26 @@ def _table(header: list[str], lines: list[list[str]]) -> list[str]:
     return out + ["| " + " | ".join(line) + " |" for line in lines]
 
 
-def _sliding(row: pd.Series, data: pd.DataFrame) -> str:
-    """Both levels of the linear sliding, the data's own levels of the class in brackets."""
+def _level_key(row: pd.Series) -> tuple:
+    return (row["split"], row["class"]) if "split" in row else (row["class"],)
+
+
+def _sliding(row: pd.Series, data: dict[tuple, pd.Series]) -> str:
+    """Both levels of the linear sliding, the data's own levels of the split's class in
+    brackets."""
     columns = ("sliding_linear", "sliding_linear_position")
     levels = [_number(row[c], 1) for c in columns]
-    own = [_number(data[c].get(row["class"]) if c in data else None, 1) for c in columns]
+    level = data.get(_level_key(row))
+    own = [_number(None if level is None else level.get(c), 1) for c in columns]
     return f"{' / '.join(levels)} ({' / '.join(own)})"
 
 
 def summary_table(summary: pd.DataFrame) -> list[str]:
     """`summarise_following`'s rows as markdown, the sliding beside the data's own level."""
-    data = summary[summary["model"] == DATA_MODEL].set_index("class")
+    data = {_level_key(r): r for _, r in summary[summary["model"] == DATA_MODEL].iterrows()}
+    split = ["split"] if "split" in summary else []
     header = [
-        "model", "steering", "class", "seeds", "segments", "cmd speed", "speed ratio",
+        "model", *split, "steering", "class", "seeds", "segments", "cmd speed", "speed ratio",
         "heading err (°)", "alternation", "sliding lin: velocity / position level (data)",
         "stand travel ratio",
         "roll / pitch / foot pitch drift (°)", "speed", "heading", "stand", "alternation",
@@ -198,7 +213,8 @@ def summary_table(summary: pd.DataFrame) -> list[str]:
             for c in ("roll_drift_deg", "pitch_drift_deg", "foot_pitch_drift_deg")
         )
         lines.append([
-            _model_label(row), STEERING_LABEL[bool(row["steering"])], row["class"],
+            _model_label(row), *(str(row[c]) for c in split),
+            STEERING_LABEL[bool(row["steering"])], row["class"],
             str(int(row["seeds"])), str(int(row["segments"])),
             _number(row["commanded_speed"]),
             _number(ratio) + (" (yaw rate)" if in_place else ""),
@@ -261,7 +277,9 @@ def scenario_table(table: pd.DataFrame) -> list[str]:
 
 
 def following_markdown(rows: pd.DataFrame, summary: pd.DataFrame, info: dict[str, Any]) -> str:
-    clips = sorted(set(rows.loc[rows["kind"] == "clip", "scenario"]))
+    clips = rows.loc[rows["kind"] == "clip"]
+    held = sorted(set(clips.loc[clips["split"] == HELD_OUT, "scenario"]))
+    trained = sorted(set(clips.loc[clips["split"] == TRAINING, "scenario"]))
     named = sorted(set(rows.loc[rows["kind"] == "scenario", "scenario"]))
     seeds = info.get("seeds")
     text = [
@@ -270,11 +288,15 @@ def following_markdown(rows: pd.DataFrame, summary: pd.DataFrame, info: dict[str
         "# Command following",
         "",
         f"Profile **{info.get('profile')}**, {info.get('epochs')} epochs, seeds {seeds}: "
-        f"named scenarios: {', '.join(named) or 'none'}; {len(clips)} test-clip scripts (the "
-        "features stage's split, mirrors included). Each segment is measured after "
+        f"named scenarios: {', '.join(named) or 'none'}; {len(held)} test-clip scripts (the "
+        f"features stage's split, mirrors included) and {len(trained)} training-clip scripts "
+        "(a few per motion class, no mirrors). Each segment is measured after "
         "its settling time (pimann.command_following). Numbers are medians over the seeds of "
-        "each seed's segments of the class (named scenarios and clip scripts together). The "
-        "`data` rows are the test clips themselves against their own scripts: the data's level.",
+        "each seed's segments of the class and split: `held_out` the named scenarios and the "
+        "test clips together, `training` the training clips. A class failing on both splits "
+        "is a motion the model cannot make; on `held_out` alone, takes (styles) it does not "
+        "generalise to. The `data` rows are the clips themselves against their own scripts: "
+        "the data's level.",
         "",
         "Criteria, on those medians:",
         f"- speed: the achieved speed along the command within ±{cf.SPEED_TOLERANCE:.0%} of the "

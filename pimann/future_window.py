@@ -1,5 +1,6 @@
 """How a rollout fills the future half of the input's velocity window (pimann.generate, step
-2): the previous prediction's output window, shifted by one step, blended with the command.
+2): the previous prediction's output window, which is already one frame ahead (y_i holds the
+window of frame i + 1, pimann.features), blended with the command.
 Shared by the generator and by training on the model's own rollouts (pimann.rollout_states).
 """
 
@@ -12,22 +13,26 @@ import numpy as np
 from pimann.feature_layout import FeatureLayout
 
 
-def command_weights(output_offsets: Sequence[int], tau: float) -> np.ndarray:
+def command_weights(output_offsets: Sequence[int], tau: float | None) -> np.ndarray:
     """(F,) the command's weight w = (t / window end)^tau in each sample of the output window
-    (the sample at t = 0 stays the network's own: 0)."""
+    (the sample at t = 0 stays the network's own: 0); `tau` None: no blend (w = 0)."""
     offsets = np.asarray(output_offsets, dtype=float)
+    if tau is None:
+        return np.zeros(len(offsets))
     weights = np.clip(offsets / max(offsets.max(), 1.0), 0, 1) ** tau
     weights[offsets <= 0] = 0.0
     return weights
 
 
 def next_future_matrix(layout: FeatureLayout) -> np.ndarray:
-    """M (F_in, F_out): the next step's future input samples from this step's output window,
-    M @ f(output offsets) = f(input offsets + 1) (velocity at step i + o is the previous
-    prediction's sample at offset o + 1)."""
+    """M (F_in, F_out): the next input's future samples from this step's output window,
+    M @ f(output offsets) = f(input future offsets). y_i's window is x_{i+1}'s, so where the
+    input's future offsets are output offsets (both windows of params.yaml) M only selects
+    samples, no interpolation: fed back, a prediction equal to the data's gives the data's
+    next input exactly."""
     in_offsets = np.asarray(layout.input_offsets, dtype=float)
     future = in_offsets[len(layout.past_input_offsets()) :]
-    return interpolation(future + 1.0, np.asarray(layout.output_offsets, dtype=float))
+    return interpolation(future, np.asarray(layout.output_offsets, dtype=float))
 
 
 def interpolation(targets: np.ndarray, knots: np.ndarray) -> np.ndarray:

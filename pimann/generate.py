@@ -3,16 +3,20 @@
 One network step per frame (50 Hz) from the standing configuration, driven by a command script
 (a scenario: segments of body-frame velocity and yaw rate, or 'stand'). Step i:
 
-1. Input x_i. Base-velocity window: the past half (offsets <= 0) is the history of generated
-   base velocities (each step's t = 0 sample after blending and steering, kept in the world
-   frame, rotated into the current base frame, as the authors' code); the future half
-   (offsets > 0) is the previous step's future window, blended with the command and, with
+1. Input x_i, built exactly as the features build it from the data (pimann.features; the
+   oracle test feeds the data's own outputs back and gets the data's inputs): the base
+   orientation R_i = R_{i-1} exp(omega dt) from the previous prediction's velocity sample at
+   offset 0 (y_{i-1}'s window is of frame i); the velocity window's past half (offsets <= 0)
+   from the history of those predicted samples (after blend and steering, kept in the world
+   frame, rotated into the base frame at i); its future half (offsets > 0) the previous
+   prediction's window at those offsets (no interpolation), blended with the command and, with
    steering, corrected by Eqs. lin_pid and rot_pid. Then s_{i-1}, sdot_{i-1} from y_{i-1} and
    the base pose p_{i-1}, psi_{i-1} (`rollout.pose_feedback`: y_{i-1}'s or the rollout's).
-2. y_i = network(x_i). Its future velocities become w * command + (1 - w) * prediction with
-   w = (t / window end)^tau (the sample at t = 0 stays the network's own), then
-   v_c = v - k0 R^T (p - p_d) and omega_c = omega - k1 vee(skew(R_d^T R)) with steering.
-3. Base orientation: R_i = R_{i-1} exp(omega_c(t=0) dt). Joints s_i from y_i.
+2. y_i = network(x_i). Its window (of frame i + 1) becomes w * command + (1 - w) * prediction
+   with w = (t / window end)^tau (`rollout.command_blend_tau`; the sample at t = 0 stays the
+   network's own; null: no blend), then v_c = v - k0 R^T (p - p_d) and omega_c = omega - k1
+   vee(skew(R_d^T R)) with steering.
+3. Joints s_i from y_i; R_{i+1} = R_i exp(omega_c(t=0) dt) for the next step.
 4. Base position by leg odometry: the support point (the lowest sole corner of the two feet)
    stays fixed in the world while it stays the support point; when it changes, the new one is
    pinned at its last world position on the ground (z = 0); a change of corner on the same foot

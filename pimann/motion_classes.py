@@ -1,5 +1,5 @@
-"""Motion classes of a trajectory, per frame, from its base motion (shared by the data report
-and the command-following benchmark).
+"""Motion classes of a trajectory, per frame, from its base motion (shared by the data report,
+the command-following benchmark and the features stage's split, stratified by class).
 
 The base's planar velocity in the heading (yaw) frame and its yaw rate, both averaged over a
 centred window of `WINDOW_S` (the mean of the finite-difference velocity over a window is the
@@ -14,6 +14,8 @@ jitter around the thresholds is not counted.
 """
 
 from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -92,6 +94,39 @@ def classify(velocity: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:
 def motion_classes(trajectory: Trajectory) -> np.ndarray:
     """(T,) index into `CLASSES` of each frame of a trajectory."""
     return classify(*base_motion(trajectory))
+
+
+def class_counts(trajectory: Trajectory) -> np.ndarray:
+    """(len(CLASSES),) frames of each class in a trajectory."""
+    return np.bincount(motion_classes(trajectory), minlength=len(CLASSES))
+
+
+def majority_class(counts: np.ndarray) -> str:
+    """The class of a clip (or of a source's clips pooled) from `class_counts`: its most
+    frequent walking class, since what it teaches is how it walks; standing where more than
+    half its frames stand, turning in place where it has no walking frame."""
+    counts = np.asarray(counts)
+    walking = [CLASSES.index(name) for name in WALKING]
+    standing = CLASSES.index("standing")
+    if 2 * counts[standing] > counts.sum():
+        return "standing"
+    if counts[walking].sum() == 0:
+        return "turning_in_place" if counts[CLASSES.index("turning_in_place")] else "standing"
+    return CLASSES[walking[int(np.argmax(counts[walking]))]]
+
+
+def spread_pick(order: Sequence[str], groups: Mapping[str, str | None], count: int) -> list[str]:
+    """The first `count` names of `order`, each of a group (a style) not picked yet while such
+    a name is left, so that a few picks span styles; a None group is a name's own."""
+    picked: list[str] = []
+    seen: set[str] = set()
+    for fresh in (True, False):
+        for name in order:
+            group = groups.get(name) or f"\0{name}"
+            if len(picked) < count and name not in picked and (group not in seen or not fresh):
+                picked.append(name)
+                seen.add(group)
+    return picked
 
 
 def transitions(moving: np.ndarray, min_frames: int) -> tuple[np.ndarray, np.ndarray]:

@@ -113,6 +113,8 @@ class FeaturesParams:
     split_seed: int
     contact_margin_s: float  # carried contact flags drop this long around every switch
     pose_input: Literal["world", "gravity"]  # the base pose the network sees (features.py)
+    # motion classes (pimann.motion_classes) whose training clips are added time-reversed
+    time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -182,7 +184,8 @@ class RolloutParams:
     k1: float  # 1/s, steering orientation gain (Eq. rot_pid)
     goal_factor: float  # goal = this x the commanded displacement ahead
     goal_radius: float  # m, stop within this horizontal distance of the goal
-    command_blend_tau: float  # future input = (1 - w) prediction + w command, w = (t/T)^tau
+    # future input = (1 - w) prediction + w command, w = (t/T)^tau; None: no blend
+    command_blend_tau: float | None
     stop_blend_s: float  # s over which the joints return to the standing pose on a stop
     stop_timeout_s: float  # s after 'stand' that a steered stop happens even off the goal
     planar_steering: bool  # authors' code: horizontal position error in the yaw frame only
@@ -194,6 +197,8 @@ class RolloutParams:
     scenario_names: list[str]  # the scenarios the DVC rollout stage generates
     # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)
     benchmark_clips: bool
+    # ... and this many training clips' per motion class (in-distribution level); 0: none
+    benchmark_train_clips: int
 
 
 @dataclasses.dataclass(frozen=True)

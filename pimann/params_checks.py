@@ -96,6 +96,7 @@ RANGES: dict[str, Bound] = {
     "rollout.command_blend_tau": NON_NEGATIVE,
     "rollout.stop_blend_s": NON_NEGATIVE,
     "rollout.stop_timeout_s": NON_NEGATIVE,
+    "rollout.benchmark_train_clips": NON_NEGATIVE,
     "rollout.scenarios.*.*.duration": POSITIVE,
     "evaluate.contact_*_height": POSITIVE,
     "evaluate.contact_switch_time": NON_NEGATIVE,

@@ -8,7 +8,9 @@ One file per run, simple to list and to rerun:
 `<model>` is the training output's folder name (`w10`, `baseline`); `baseline` is the
 ADHERENT-style model (ground-projected features, no physics term). `<scenario>` is a named
 scenario of `rollout.scenario_names` or, with `rollout.benchmark_clips`, `clip_<clip name>`: the
-command-following benchmark's script of one test clip. Every rollout records the script it ran
+command-following benchmark's script of one test clip (with `rollout.benchmark_train_clips`,
+`train_<clip name>`: of a training clip; `scenario_split` tells them). Every rollout records the
+script it ran
 in its attrs["script"] (JSON, `script_json`; `read_script` reads it back). The helpers at the
 end name the models of a table keyed like the layout (model, pi_weight, seed, scenario,
 steering), as the evaluation's metrics.csv is.
@@ -38,6 +40,8 @@ BASELINE = "baseline"
 MODELS_FILE = "models.json"
 STEERING_LABEL = {True: "steering", False: "nosteering"}
 CLIP_PREFIX = "clip_"  # the benchmark scripts' scenario names: clip_<clip name>
+TRAIN_PREFIX = "train_"  # ... of a training clip: train_<clip name>
+HELD_OUT, TRAINING = "held_out", "training"  # the benchmark's splits (`scenario_split`)
 SCRIPT_ATTR = "script"  # a rollout's attrs: the script it ran, as JSON
 
 
@@ -124,13 +128,28 @@ def read_script(trajectory: Trajectory, params: Params | None = None) -> list[Se
 
 
 def is_clip(scenario: str) -> bool:
-    """A benchmark script of a test clip, not a named scenario."""
-    return scenario.startswith(CLIP_PREFIX)
+    """A benchmark script of a clip (test or training), not a named scenario."""
+    return scenario.startswith((CLIP_PREFIX, TRAIN_PREFIX))
+
+
+def scenario_split(scenario: str) -> str:
+    """TRAINING for a training clip's script, else HELD_OUT: the test clips' and the named
+    scenarios' commands, which no training clip gave."""
+    return TRAINING if scenario.startswith(TRAIN_PREFIX) else HELD_OUT
+
+
+def _file_stem(clip: str) -> str:
+    return re.sub(r"[^A-Za-z0-9_.-]", "_", clip)
 
 
 def clip_scenario(clip: str) -> str:
-    """The scenario name (a file stem) of a clip's benchmark script: clip_<clip name>."""
-    return CLIP_PREFIX + re.sub(r"[^A-Za-z0-9_.-]", "_", clip)
+    """The scenario name (a file stem) of a test clip's benchmark script: clip_<clip name>."""
+    return CLIP_PREFIX + _file_stem(clip)
+
+
+def train_scenario(clip: str) -> str:
+    """The scenario name of a training clip's benchmark script: train_<clip name>."""
+    return TRAIN_PREFIX + _file_stem(clip)
 
 
 def model_seeds(models_dir: str | Path) -> dict[int, Path]:

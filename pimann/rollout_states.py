@@ -156,7 +156,8 @@ class OwnRollouts:
 
     def _future(self, previous: torch.Tensor, x: torch.Tensor) -> torch.Tensor:
         """(E, C, F_in * 6) normalised future samples: the previous prediction's output window
-        shifted one step, blended with the command (the data's mean over x's future samples)."""
+        (already one frame ahead), blended with the command (the data's mean over x's future
+        samples)."""
         f = self.future
         own = previous[..., f["y"]] * f["y_std"] + f["y_mean"]  # (E, C, F_out, 6)
         data = x[..., f["x"]] * f["x_std"] + f["x_mean"]  # (E, C, F_in, 6)

@@ -3,7 +3,8 @@ and without steering, generated in batches and written in the layout of pimann.r
 
 The scripts are the named scenarios of `rollout.scenario_names` and, with
 `rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
-features stage's split (pimann.benchmark_clips).
+features stage's split (pimann.benchmark_clips), with `rollout.benchmark_train_clips` also of a
+few training clips per motion class.
 """
 
 from __future__ import annotations
@@ -75,18 +76,18 @@ def _generate_seed(
 
 def rollout_scripts(params: Params) -> dict[str, list[Segment]]:
     """{scenario: script} the rollout stage runs: the named scenarios of
-    `rollout.scenario_names`, then (`rollout.benchmark_clips`) the test clips' scripts."""
+    `rollout.scenario_names`, then the benchmark's clips' scripts (`rollout.benchmark_clips`:
+    the test clips', `rollout.benchmark_train_clips`: training clips')."""
     names = scenario_names(params.rollout)
     unknown = [name for name in names if name not in params.rollout.scenarios]
     if unknown:
         raise PimannError("params.yaml", f"rollout.scenario_names: unknown scenario {unknown[0]!r}")
     scripts = {name: list(params.rollout.scenarios[name]) for name in names}
-    if params.rollout.benchmark_clips:
-        clips = benchmark_scripts(params)
-        clash = sorted(set(clips) & set(scripts))
-        if clash:
-            raise PimannError("params.yaml", f"scenario {clash[0]!r} is also a clip's script name")
-        scripts.update(clips)
+    clips = benchmark_scripts(params)
+    clash = sorted(set(clips) & set(scripts))
+    if clash:
+        raise PimannError("params.yaml", f"scenario {clash[0]!r} is also a clip's script name")
+    scripts.update(clips)
     return scripts
 
 

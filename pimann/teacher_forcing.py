@@ -28,7 +28,7 @@ import pandas as pd
 import torch
 
 from pimann.errors import PimannError
-from pimann.features import read_dataset
+from pimann.features import REVERSED_SUFFIX, read_dataset, time_reversed
 from pimann.motion_classes import CLASSES, motion_classes
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
@@ -40,8 +40,14 @@ OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
 
 
 def sample_classes(collection: Path, clips: list[str], origin: np.ndarray) -> np.ndarray:
-    """(N,) motion class name of each sample's frame (origin: clip index, step)."""
-    by_name = {name: motion_classes(t) for name, t in iter_collection(collection)}
+    """(N,) motion class name of each sample's frame (origin: clip index, step); a clip the
+    features added time-reversed (`<name>~reversed`) is classed as played backward."""
+    trajectories = dict(iter_collection(collection))
+    by_name = {name: motion_classes(t) for name, t in trajectories.items()}
+    for name in set(clips) - set(by_name):
+        original = trajectories.get(name.removesuffix(REVERSED_SUFFIX))
+        if name.endswith(REVERSED_SUFFIX) and original is not None:
+            by_name[name] = motion_classes(time_reversed(original))
     return np.array([CLASSES[by_name[clips[c]][step]] for c, step in origin])
 
 

@@ -3,8 +3,9 @@
     python stages/rollout.py --models models/w10 --out results/rollouts/w10 [--workers 2]
 
 rolls out every seed of the training output in every scenario of `rollout.scenario_names`
-and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>),
-with and without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
+and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>)
+and (`rollout.benchmark_train_clips`) a few training clips' (train_<clip name>), with and
+without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
 the models' meta in <out>/models.json (layout: pimann.rollout_layout).
 """
 

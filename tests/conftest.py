@@ -55,3 +55,25 @@ def random_configuration(robot: Robot, rng: np.random.Generator) -> np.ndarray:
     joints = rng.uniform(robot.joint_lower, robot.joint_upper)
     quaternion = rng.normal(size=4)
     return robot.configuration(rng.normal(size=3), quaternion, joints)
+
+
+REAL_WALK = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"
+REAL_BACKWARD = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk-back_active_001.bvh"
+
+
+@pytest.fixture(scope="session")
+def real_walks():
+    """{name: trajectory}: two real Bandai Namco clips (forward, backward) retargeted as the
+    retarget stage does it, and the forward one's mirror (about 4 s of CPU)."""
+    from pimann.mocap.mirror import mirror_trajectory
+    from pimann.paths import mocap_dir
+    from pimann.retarget import retarget_file
+
+    params = load_params()
+    root = mocap_dir() / "bandai-namco/dataset"
+    forward = retarget_file(root / REAL_WALK, params)
+    return {
+        "walk": forward,
+        "walk_mirrored": mirror_trajectory(forward),
+        "walk_back": retarget_file(root / REAL_BACKWARD, params),
+    }

@@ -199,7 +199,7 @@ def test_retarget_clip_labels_clips_and_the_split_keeps_takes_together(monkeypat
     assert first.attrs["clip_start_s"] == pytest.approx(20.0)
     assert first.time[0] == 0.0
     for seed in range(5):
-        test = split_sources([t.source for _, t in collection], 0.3, seed)
+        test = split_sources([t for _, t in collection], 0.3, seed)
         sides: dict[str, set[bool]] = {}
         for _, trajectory in collection:
             sides.setdefault(trajectory.attrs["take"], set()).add(trajectory.source in test)

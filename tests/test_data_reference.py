@@ -80,7 +80,8 @@ def test_level_is_the_median_over_clips_with_enough_forward_walking(params, tmp_
     assert linear["median"] == pytest.approx(FRAMES * 0.6 / np.sqrt(3), rel=1e-6)
     assert linear["min"] == pytest.approx(FRAMES * 0.3 / np.sqrt(3), rel=1e-6)
     assert reference["joint_velocities"] == "differences"
-    test = split_sources(list(clips), params.features.test_fraction, params.features.split_seed)
+    features = params.features
+    test = split_sources(clips.values(), features.test_fraction, features.split_seed)
     assert reference["test"]["clips"] == len(test)
     used = [name for name in test if name in ("a", "b", "c")]
     assert reference["test"]["used"] == len(used)

@@ -145,7 +145,7 @@ def test_sliding_of_a_foot_sliding_at_a_known_speed(params):
     assert summary["glides"]["fraction_above_target"] == 1.0
     # L_B of a rigidly moving robot with still joints: |v|^2 / 6 for either support
     assert summary["l_b"]["lower_sole"]["mean"] == pytest.approx(u * u / 6, rel=1e-4)
-    assert summary["l_b"]["lower_sole"]["samples"] == n - 50 - 60  # the windows drop the ends
+    assert summary["l_b"]["lower_sole"]["samples"] == n - 51 - 61  # the windows drop the ends
     settled = summary["l_b"]["data_contacts"]["mean"]
     assert settled == pytest.approx(u * u / 6, rel=1e-4)
 

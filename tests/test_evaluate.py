@@ -14,6 +14,7 @@ from test_claims import REFERENCE, crafted_metrics
 from test_rollouts import benchmark_collection
 
 from pimann.claims import claims_markdown
+from pimann.command_following import summarise_following
 from pimann.errors import PimannError
 from pimann.evaluate import (
     evaluate_all,
@@ -23,6 +24,7 @@ from pimann.evaluate import (
     summarise,
     write_results,
 )
+from pimann.key_metrics import following_metrics
 from pimann.metrics import trajectory_metrics
 from pimann.params import load_params
 from pimann.rollout_layout import BASELINE, read_script, select_rows
@@ -105,7 +107,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     from pimann.params import MotionSegment
 
     # the data's level: one clip at 0.5 m/s (5 s of forward walking), one standing; the test
-    # clips (benchmark scripts): a 2 s walk at 0.4 m/s and its 'mirror'
+    # clips (benchmark scripts): a 2 s walk at 0.4 m/s and its 'mirror'; the training clips'
+    # benchmark: one per class, a 2 s walk (d; a is longer than any script run) and the stand (b)
     data = benchmark_collection(tmp_path / "walking.h5")
     short = dataclasses.replace(
         params,
@@ -115,6 +118,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
             scenarios={"short": [MotionSegment(0.6, 0.5, 0.0, 0.0)]},
             scenario_names=["short"],
             benchmark_clips=True,
+            benchmark_train_clips=1,
         ),
         figures=dataclasses.replace(params.figures, scenario="short"),
     )
@@ -123,7 +127,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     rollouts = tmp_path / "rollouts"
     for name in ("w10", "baseline"):
         written = run_rollouts(tmp_path / "models" / name, rollouts / name, short, workers=1)
-        assert len(written) == 2 * 3 * (2 if name == "w10" else 1)  # (short + 2 clips) x steering
+        # (short + 2 test clips + 2 training clips) x steering per seed
+        assert len(written) == 2 * 5 * (2 if name == "w10" else 1)
     first = read_trajectory(rollouts / "w10" / "1" / "short-steering.h5")
     assert first.attrs["seed"] == 1 and first.attrs["pi_weight"] == 10.0
     assert read_script(first) == short.rollout.scenarios["short"]
@@ -135,7 +140,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     results = tmp_path / "results"
     claims = evaluate_all(rollouts, results, short, workers=1, data=data)
     frame = read_metrics(results / "metrics.csv")
-    assert len(frame) == 18 and set(frame["model"]) == {"w10", BASELINE}
+    assert len(frame) == 30 and set(frame["model"]) == {"w10", BASELINE}
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
     row = select_rows(frame, "short", True, model="w10", seed=1).iloc[0]
     expected = trajectory_metrics(first, params=short.evaluate)
@@ -162,15 +167,35 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert {c.id for c in claims} >= {"C1", "C2", "C14"}
 
     following = pd.read_csv(results / "command_following.csv")
-    assert len(following) == 18 + 2  # one segment per rollout, and the two test clips' own
+    assert len(following) == 30 + 4  # one segment per rollout, and the four clips' own
     data_rows = following[following["model"] == "data"]
-    assert set(data_rows["scenario"]) == {"clip_c", "clip_c_mirror"}
+    assert set(data_rows["scenario"]) == {"clip_c", "clip_c_mirror", "train_d", "train_b"}
     assert not data_rows["steering"].any() and set(data_rows["seed"]) == {0}
-    assert data_rows["speed_ratio"].to_numpy() == pytest.approx(1.0, abs=0.02)
+    walks = data_rows[~data_rows["stand"]]
+    assert walks["speed_ratio"].to_numpy() == pytest.approx(1.0, abs=0.02)
     assert set(following["kind"]) == {"scenario", "clip"}
     assert set(following.loc[following["scenario"] == "short", "kind"]) == {"scenario"}
+    # the training clips' scripts on the training split, the rest (test clips, named) held out
+    training = following["scenario"].str.startswith("train_")
+    assert set(following.loc[training, "split"]) == {"training"}
+    assert set(following.loc[~training, "split"]) == {"held_out"}
+    assert set(following.loc[training, "model"]) == {"data", "w10", BASELINE}
+    summary = summarise_following(following)
+    w10 = summary[(summary["model"] == "w10") & ~summary["steering"]]
+    assert set(zip(w10["split"], w10["class"], strict=True)) == {
+        ("held_out", "forward"), ("training", "forward"), ("training", "standing")
+    }  # fmt: skip
+    trained = w10[(w10["split"] == "training") & (w10["class"] == "forward")].iloc[0]
+    runs = following[(following["model"] == "w10") & (following["scenario"] == "train_d")]
+    assert trained["seeds"] == 2 and trained["speed_ratio"] == pytest.approx(
+        runs.loc[~runs["steering"], "speed_ratio"].median()
+    )
+    held_only = following[~training].drop(columns="split")  # the key numbers: held out only
+    assert following_metrics(following) == following_metrics(held_only)
     text = (results / "command_following.md").read_text()
-    assert "Profile **" in text and "| data | nosteering | forward |" in text
+    assert "Profile **" in text and "| data | held_out | nosteering | forward |" in text
+    assert "| data | training | nosteering | standing |" in text
+    assert "| w10 (w=10) | training | steering | forward |" in text
     assert "## Named scenarios" in text and "| w10 (w=10) | steering | short |" in text
     assert (results / "command_following.png").read_bytes()[:4] == b"\x89PNG"
 
@@ -192,7 +217,7 @@ def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp
         params,
         rollout=dataclasses.replace(
             params.rollout, scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]},
-            scenario_names=["short"], benchmark_clips=False,
+            scenario_names=["short"], benchmark_clips=False, benchmark_train_clips=0,
         ),
     )  # fmt: skip
     models = tmp_path / "models" / "w10"

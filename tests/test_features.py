@@ -66,10 +66,12 @@ def synthetic_collection(n_sources: int = 6, frames: int = 160) -> list[tuple[st
 
 @pytest.fixture(scope="module")
 def params():
-    """The repository's params with the paper's world pose input (the closed forms below)."""
+    """The repository's params with the paper's world pose input (the closed forms below) and
+    no time-reversed clips (the paper's; tested on its own below)."""
     params = load_params()
     return dataclasses.replace(
-        params, features=dataclasses.replace(params.features, pose_input="world")
+        params,
+        features=dataclasses.replace(params.features, pose_input="world", time_reversed=[]),
     )
 
 
@@ -95,27 +97,35 @@ def test_constant_velocity_features_match_closed_form(params):
     clip = synthetic_clip(300, velocity, yaw_rate)
     layout = window_layout(params.features, RATE, "full")
     x, y, steps = clip_features(clip, layout)
-    # a full window needs 50 frames before and 60 after; the state needs step i-1
-    assert steps[0] == 50 and steps[-1] == 300 - 1 - 60 and len(x) == len(steps)
+    # first differences: a full window needs 51 frames before (the difference ending at i-50)
+    # and the output's window 61 after (the window of frame i+1)
+    assert steps[0] == 51 and steps[-1] == 300 - 1 - 61 and len(x) == len(steps)
     xs, ys = layout.x_slices, layout.y_slices
     time = steps / RATE
-    centre = (
-        Rotation.from_euler("z", (yaw_rate * time)[:, None]) * Rotation.from_euler("y", PITCH)
-    ).inv()
-    expected_linear = centre.apply(velocity)  # world velocity in the base frame at i
+
+    def in_base(at_time):  # the world velocity in the base frame at `at_time`
+        yaw = Rotation.from_euler("z", (yaw_rate * at_time)[:, None])
+        return (yaw * Rotation.from_euler("y", PITCH)).inv().apply(velocity)
+
+    expected_linear = in_base(time)
     expected_angular = Rotation.from_euler("y", -PITCH).apply([0.0, 0.0, yaw_rate])
     linear = x[:, xs["base_linear_window"]].reshape(len(x), 12, 3)
     angular = x[:, xs["base_angular_window"]].reshape(len(x), 12, 3)
     np.testing.assert_allclose(linear, np.repeat(expected_linear[:, None], 12, 1), atol=1e-9)
     np.testing.assert_allclose(angular, np.broadcast_to(expected_angular, angular.shape), atol=1e-9)
-    future = y[:, ys["base_linear_future"]].reshape(len(y), 7, 3)
-    np.testing.assert_allclose(future, np.repeat(expected_linear[:, None], 7, 1), atol=1e-9)
+    future = y[:, ys["base_linear_future"]].reshape(len(y), 7, 3)  # in the base frame at i+1
+    ahead = in_base(time + 1 / RATE)
+    np.testing.assert_allclose(future, np.repeat(ahead[:, None], 7, 1), atol=1e-9)
+    assert np.abs(future[:, 0] - expected_linear).max() > 1e-3  # not the input's frame
     # state: x at i-1, y at i
     np.testing.assert_allclose(x[:, xs["joints"]], clip.joint_positions[steps - 1])
     np.testing.assert_allclose(y[:, ys["base_position"]], clip.base_position[steps])
-    analytic = 0.2 * 2 * np.pi * 1.1 * np.cos(2 * np.pi * 1.1 * time[:, None])
+    # a first difference is the derivative half a frame earlier (to (omega dt)^2 / 24)
+    analytic = 0.2 * 2 * np.pi * 1.1 * np.cos(2 * np.pi * 1.1 * (time[:, None] - 0.5 / RATE))
     velocities = y[:, ys["joint_velocities"]]
     np.testing.assert_allclose(velocities, np.broadcast_to(analytic, velocities.shape), atol=0.01)
+    joints_now = y[:, ys["joints"]]
+    np.testing.assert_allclose(joints_now, x[:, xs["joints"]] + velocities / RATE, atol=1e-12)
     # psi against pinocchio's rpy, and yaw unwrapped: continuous past pi
     rpy = y[:, ys["base_rpy"]]
     reference = np.array(
@@ -177,14 +187,73 @@ def test_split_keeps_mirrors_with_their_clip_and_does_not_leak(params):
     train_sources = {source_of[c] for c in dataset.train_clips}
     test_sources = {source_of[c] for c in dataset.test_clips}
     assert not train_sources & test_sources
-    assert len(test_sources) == 2 and len(train_sources) == 8
+    # 5 forward and 5 turning sources: 2 of each held out, though 0.2 of 10 is 2
+    assert len(test_sources) == 4 and len(train_sources) == 6
     for source in test_sources:  # both the clip and its mirror are held out
         assert {f"{source}", f"{source}_mirror"} <= set(dataset.test_clips)
     # deterministic, and another seed picks another split
-    assert split_sources(dataset.sources, 0.2, 0) == test_sources
-    assert any(split_sources(dataset.sources, 0.2, s) != test_sources for s in range(1, 5))
+    trajectories = [t for _, t in clips]
+    assert split_sources(trajectories, 0.2, 0) == test_sources
+    assert any(split_sources(trajectories, 0.2, s) != test_sources for s in range(1, 5))
     with pytest.raises(PimannError, match="2 source clips"):
         build_dataset(clips[:2], features, "full")
+
+
+def class_collection() -> tuple[list[tuple[str, Trajectory]], dict[str, str], dict[str, str]]:
+    """Straight-line clips (and 'mirrors') of four classes: 6 forward sources, 4 backward, 3
+    side, 1 diagonal, styles repeating within a class; also {source: class}, {source: style}."""
+    kinds = {
+        "forward": ((0.6, 0.0, 0.0), "aabbcc"),
+        "backward": ((-0.5, 0.0, 0.0), "aabb"),
+        "side": ((0.0, 0.3, 0.0), "abc"),
+        "diagonal": ((0.3, 0.3, 0.0), "a"),
+    }
+    clips, classes, styles = [], {}, {}
+    for name, (velocity, style_of) in kinds.items():
+        for k, style in enumerate(style_of):
+            source = f"{name}_{style}_{k:03d}.bvh"
+            classes[source], styles[source] = name, style
+            for mirrored in (False, True):
+                clip = synthetic_clip(160, velocity, 0.0, source, mirrored, float(mirrored))
+                clip = dataclasses.replace(clip, attrs={"mirrored": mirrored, "style": style})
+                clips.append((f"{source[:-4]}{'_mirror' if mirrored else ''}", clip))
+    return clips, classes, styles
+
+
+def test_split_holds_out_every_class_in_different_styles(params):
+    clips, classes, styles = class_collection()
+    trajectories = [t for _, t in clips]
+    test = split_sources(trajectories, 0.1, 0)
+    held = {name: sorted(s for s in test if classes[s] == name) for name in set(classes.values())}
+    assert len(held["forward"]) == 2 and len(held["backward"]) == 2  # 4 or more sources: 2
+    assert len(held["side"]) == 1 and held["diagonal"] == []  # 2-3 sources: 1; one source: 0
+    assert len(test) == 5  # 0.1 of 14 sources is 1: the per-class minimum alone
+    for name in ("forward", "backward"):  # held out in two styles, not twice the same
+        assert len({styles[s] for s in held[name]}) == 2
+    assert len(split_sources(trajectories, 0.5, 0)) == 7  # the shuffle fills up to 7 of 14
+    # a source's clips, the mirror with them, all on one side of the features stage's split
+    features = dataclasses.replace(params.features, test_fraction=0.1, split_seed=0)
+    dataset = build_dataset(clips, features, "full")
+    assert {name.removesuffix("_mirror") + ".bvh" for name in dataset.test_clips} == test
+    assert not set(dataset.test_clips) & set(dataset.train_clips)
+    assert len(dataset.test_clips) == 2 * len(test)
+    # deterministic for a seed; another seed, another split of the same strata
+    assert split_sources(reversed(trajectories), 0.1, 0) == test
+    others = [split_sources(trajectories, 0.1, seed) for seed in range(1, 6)]
+    assert any(other != test for other in others)
+    assert all(sum(classes[s] == "backward" for s in other) == 2 for other in others)
+
+
+def test_a_clip_class_is_its_walking_majority_unless_it_mostly_stands():
+    from pimann.motion_classes import CLASSES, majority_class
+
+    def counts(**frames):
+        return np.array([frames.get(name, 0) for name in CLASSES])
+
+    assert majority_class(counts(forward=30, backward=40, standing=45)) == "backward"
+    assert majority_class(counts(forward=30, turning_in_place=50, standing=20)) == "forward"
+    assert majority_class(counts(forward=30, standing=31)) == "standing"
+    assert majority_class(counts(turning_in_place=30, standing=20)) == "turning_in_place"
 
 
 def test_settled_contacts_drop_frames_around_switches():
@@ -366,3 +435,32 @@ def test_read_dataset_names_the_file_and_what_is_wrong(tmp_path, small_dataset, 
     with pytest.raises(PimannError, match=message) as raised:
         read_dataset(path)
     assert raised.value.path == str(path) and "\n" not in str(raised.value)
+
+
+def test_time_reversed_training_clips_walk_backward_beside_their_original(params):
+    """Forward clips played backward: the same poses in reverse order, their features those of
+    backward walking (the window's velocities negated and reversed), on the original's side of
+    the split; test clips are never reversed."""
+    from pimann.features import time_reversed
+
+    clip = synthetic_clip(200, np.array([0.5, 0.0, 0.0]), 0.0, source="walker")
+    back = time_reversed(clip)
+    np.testing.assert_array_equal(back.base_position, clip.base_position[::-1])
+    np.testing.assert_array_equal(back.joint_positions[0], clip.joint_positions[-1])
+    np.testing.assert_array_equal(back.time, clip.time)
+    assert back.source == clip.source
+    layout = window_layout(params.features, RATE, "full")
+    x, _, steps = clip_features(back, layout)
+    linear = x[:, layout.x_slices["base_linear_window"]].reshape(len(x), 12, 3)
+    np.testing.assert_allclose(linear[..., 0], -0.5 * np.cos(PITCH), atol=1e-9)  # backward
+    clips = synthetic_collection(n_sources=6)
+    reversing = dataclasses.replace(params.features, time_reversed=["forward", "turning"])
+    dataset = build_dataset(clips, reversing, "full")
+    plain = build_dataset(clips, params.features, "full")
+    reversed_names = [c for c in dataset.clips if c.endswith("~reversed")]
+    assert reversed_names and set(dataset.test_clips) == set(plain.test_clips)
+    assert not set(reversed_names) & set(dataset.test_clips)
+    assert len(dataset.x_train) > len(plain.x_train)
+    sources = dict(zip(dataset.clips, dataset.sources, strict=True))
+    for name in reversed_names:
+        assert sources[name] == sources[name.removesuffix("~reversed")]

@@ -72,7 +72,7 @@ def test_own_inputs_feed_back_the_members_previous_prediction(own):
         y_cols = slice(ys[f"{block}_future"].start + now, ys[f"{block}_future"].start + now + 3)
         error = predicted[..., y_cols] - truth[..., y_cols]
         np.testing.assert_allclose(own_x[..., x_cols] - data_x[..., x_cols], error, atol=1e-4)
-    # the future samples: the prediction at k - 1 shifted one step and blended with the data's
+    # the future samples: the prediction at k - 1 (already one frame ahead), blended with the data's
     # mean future velocity, w = t / window end (np.interp, clamped at the window's end)
     out_offsets = np.asarray(layout.output_offsets, dtype=float)
     weights = out_offsets / out_offsets.max()
@@ -84,7 +84,7 @@ def test_own_inputs_feed_back_the_members_previous_prediction(own):
         command = np.mean([data_x[..., start + 3 * k : start + 3 * k + 3] for k in future], 0)
         blended = (1 - weights)[:, None] * own_window + weights[:, None] * command[..., None, :]
         for k in future:
-            at = layout.input_offsets[k] + 1.0
+            at = float(layout.input_offsets[k])  # y_i holds the window of frame i + 1
             row = np.array([np.interp(at, out_offsets, knot) for knot in knots])
             expected = np.einsum("j,erjc->erc", row, blended)
             np.testing.assert_allclose(own_x[..., start + 3 * k : start + 3 * k + 3], expected,

@@ -15,13 +15,15 @@ import pandas as pd
 import pytest
 from test_data_reference import walking_clip
 
-from pimann.benchmark_clips import benchmark_scripts
+from pimann.benchmark_clips import benchmark_clips, benchmark_scripts
 from pimann.clip_commands import clip_commands
 from pimann.errors import PimannError
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
 from pimann.rollout_layout import (
     BASELINE,
+    HELD_OUT,
+    TRAINING,
     RolloutKey,
     clip_scenario,
     find_rollouts,
@@ -67,7 +69,8 @@ def test_table_models_and_rows():
 
 
 def benchmark_collection(path):
-    """Sources a, b, c: features.split_seed 0 holds out c (a short walk and its 'mirror')."""
+    """Sources a, b, c, d: features.split_seed 0 holds out c (a short walk and its 'mirror';
+    one of the three forward sources), leaving a and d (forward) and b (standing) to train on."""
     write_collection(
         path,
         [
@@ -75,20 +78,30 @@ def benchmark_collection(path):
             ("b", walking_clip(0.0, 100, "b")),
             ("c", walking_clip(0.4, 100, "c")),
             ("c mirror", walking_clip(0.4, 100, "c")),
+            ("d", walking_clip(0.45, 100, "d")),
         ],
     )
     return path
 
 
-def test_benchmark_scripts_of_the_test_clips_only(tmp_path):
+def test_benchmark_scripts_of_the_test_clips_and_a_few_training_clips(tmp_path):
     params = load_params()
     collection = benchmark_collection(tmp_path / "walking.h5")
     params = dataclasses.replace(
         params,
         features=dataclasses.replace(params.features, input=str(collection), split_seed=0),
+        rollout=dataclasses.replace(params.rollout, benchmark_train_clips=2),
     )
     scripts = benchmark_scripts(params)
-    assert list(scripts) == ["clip_c", "clip_c_mirror"]  # a file stem: the space replaced
+    # a file stem: the space replaced; then the training clips by class (forward, standing)
+    assert list(scripts) == ["clip_c", "clip_c_mirror", "train_d", "train_a", "train_b"]
+    assert scripts["train_a"] == clip_commands(walking_clip(0.5, 300, "a"))
+    assert [c.split for c in benchmark_clips(collection, params)] == [HELD_OUT] * 2 + [TRAINING] * 3
+    # no training clip longer than the longest script run anyway (here the test clip's 2 s)
+    brief = dataclasses.replace(params, rollout=dataclasses.replace(
+        params.rollout, scenarios={"step": [MotionSegment(1.0, 0.5, 0.0, 0.0)]},
+        scenario_names=["step"]))  # fmt: skip
+    assert list(benchmark_scripts(brief)) == ["clip_c", "clip_c_mirror", "train_d", "train_b"]
     expected = clip_commands(walking_clip(0.4, 100, "c"))
     assert scripts["clip_c"] == scripts["clip_c_mirror"] == expected
     assert isinstance(expected[0], MotionSegment) and expected[0].vx == pytest.approx(0.4, abs=0.01)
@@ -97,10 +110,12 @@ def test_benchmark_scripts_of_the_test_clips_only(tmp_path):
     assert parse_rollout_path(tmp_path, rollout_path(tmp_path, key)) == key
 
     named = rollout_scripts(params)
-    assert list(named) == [*params.rollout.scenario_names, "clip_c", "clip_c_mirror"]
-    only = dataclasses.replace(
-        params, rollout=dataclasses.replace(params.rollout, benchmark_clips=False)
-    )
+    assert list(named) == [*params.rollout.scenario_names, *scripts]
+    one = dataclasses.replace(params, rollout=dataclasses.replace(
+        params.rollout, benchmark_clips=False, benchmark_train_clips=1))  # fmt: skip
+    assert list(rollout_scripts(one)) == [*params.rollout.scenario_names, "train_d", "train_b"]
+    only = dataclasses.replace(params, rollout=dataclasses.replace(
+        one.rollout, benchmark_train_clips=0))  # fmt: skip
     assert list(rollout_scripts(only)) == params.rollout.scenario_names
 
 
@@ -182,6 +197,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
             },  # fmt: skip
             scenario_names=["short", "stop"],
             benchmark_clips=False,
+            benchmark_train_clips=0,
         ),
     )
     _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])

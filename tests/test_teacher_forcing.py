@@ -40,9 +40,14 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
     save_model(tmp_path / "w0" / "0", model, dataset.layout, dataset.stats, meta)
     table = class_response(tmp_path / "w0", collection, samples=500)
     assert set(table["split"]) == {"train", "test"}
-    assert set(table["class"]) <= {"forward", "turning", "diagonal"}
-    # the truth is the clips' own forward speed in the base frame (0.2 .. 0.7 m/s, pitched base)
-    assert ((table["vx_true"] > 0.1) & (table["vx_true"] < 0.8)).all()
+    assert set(table["class"]) <= {"forward", "turning", "diagonal", "backward"}
+    # the training clips played backward (features.time_reversed) walk backward, in training
+    backward = table["class"] == "backward"
+    assert backward.any() and set(table.loc[backward, "split"]) == {"train"}
+    # the truth is the clips' own speed in the base frame (0.2 .. 0.7 m/s, pitched base)
+    straight = table["class"].isin(["forward", "backward"])
+    speed = table["vx_true"].where(~backward, -table["vx_true"])[straight]
+    assert straight.sum() >= 3 and ((speed > 0.1) & (speed < 0.8)).all()
     assert table["samples"].min() >= 50 and np.isfinite(table["vx_slope"]).all()
 
 
