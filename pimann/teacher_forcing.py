@@ -1,7 +1,8 @@
 """Teacher-forced response per motion class: does a trained model predict the data's velocity?
 
-Fed the data's own inputs, a model's first output sample (the base velocity at the current
-step, in the base frame) should match the data's. Where it does and a rollout still fails,
+Fed the data's own inputs, a model's first output sample (the base velocity of the next
+frame, in its base frame: not an input column) should match the data's, and so should its
+legs' joint steps s_i - s_{i-1}. Where it does and a rollout still fails,
 the rollout loop is the cause (how it starts, what it feeds back); where it does not, the
 training is. Run after `dvc repro` (it reads models/ and data/features):
 
@@ -13,7 +14,8 @@ prediction on the truth (1: follows the data; 0: ignores it); and on the samples
 support (the data's contact flags) the same for the contact leg's share of the sole's forward
 velocity, (J_SF^B)^-1 J_SF^s sdot along the base's x (pimann.physics_loss), which on a still
 foot cancels the base's forward velocity: L_B charges their sum, so where a model predicts a
-small base velocity this tells whether its legs shrank with it.
+small base velocity this tells whether its legs shrank with it; and the slope of the
+predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's).
 """
 
 from __future__ import annotations
@@ -32,11 +34,16 @@ from pimann.features import REVERSED_SUFFIX, read_dataset, time_reversed
 from pimann.motion_classes import CLASSES, motion_classes
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.robot import JOINT_NAMES
 from pimann.rollout_layout import model_seeds
 from pimann.training_loss import TrainingLoss
 from pimann.trajectory import iter_collection
 
+# the next frame's base velocity (y_i's window is of frame i + 1: not an input column)
 OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
+LEG_JOINTS = [
+    k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))
+]
 
 
 def sample_classes(collection: Path, clips: list[str], origin: np.ndarray) -> np.ndarray:
@@ -55,6 +62,16 @@ def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
     centred = truth - truth.mean()
     denominator = float(centred @ centred)
     return float(centred @ (prediction - prediction.mean())) / denominator if denominator else 0.0
+
+
+def leg_joint_steps(layout, stats, x: np.ndarray, y: np.ndarray, predicted: np.ndarray):
+    """(truth, prediction) (N, legs): the leg joints' step s_i - s_{i-1} of the data's output
+    and of the predicted one from the same input (normalised x, y, predicted; radians)."""
+    xs, ys = layout.x_slices["joints"], layout.y_slices["joints"]
+    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    truth = y[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
+    prediction = predicted[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
+    return truth[:, LEG_JOINTS], prediction[:, LEG_JOINTS]
 
 
 def contact_leg_velocity(
@@ -112,6 +129,7 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
             prediction = predicted[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
             leg_truth = leg_truths[split]
             leg_prediction = contact_leg_velocity(loss, predicted, contacts)
+            step_truth, step_prediction = leg_joint_steps(layout, stats, x, y, predicted)
             for name in CLASSES:
                 mask = classes[split] == name
                 if mask.sum() < 50:
@@ -131,6 +149,8 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                     "vy_true": truth[mask, 1].mean(), "vy_pred": prediction[mask, 1].mean(),
                     "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
                     "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]), **leg,
+                    "leg_step_slope": _slope(step_truth[mask].ravel(),
+                                             step_prediction[mask].ravel()),
                 })  # fmt: skip
     return pd.DataFrame(rows)
 
