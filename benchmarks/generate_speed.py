@@ -14,6 +14,9 @@ A full-size MANN (random weights, the layout of `features.window_layout`), 50 Hz
 The clip scripts are the command-following benchmark's (the test clips of `--collection`,
 default the repository's features.input) or, without the collection, 12 random scripts of
 4-16 s. Run from the repository root: python -m benchmarks.generate_speed
+
+`--smoke`: the same code paths in a few seconds (1-s rollouts, batches of 1 and 4, one pass
+each, 1 named scenario and 2 clip scripts cut to 1 s), to check that the benchmark still runs.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -28,10 +32,11 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from pimann.batch_generate import SECTIONS
 from pimann.benchmark_clips import benchmark_scripts
 from pimann.command_script import scenario_steps
 from pimann.feature_layout import Normalisation, window_layout
-from pimann.generate import SECTIONS, RolloutSpec, generate_batch, generate_rollout
+from pimann.generate import RolloutSpec, generate_batch, generate_rollout
 from pimann.mann import MANN
 from pimann.params import MotionSegment, StandSegment, load_params
 from pimann.paths import REPO_ROOT
@@ -58,16 +63,16 @@ def near_standing(layout) -> Normalisation:
     )  # fmt: skip
 
 
-def clip_scripts(params, collection: Path | None) -> tuple[list[list], str]:
-    """12 scripts of the command-following benchmark, or random ones of its kind."""
+def clip_scripts(params, collection: Path | None, n_clips: int = N_CLIPS) -> tuple[list[list], str]:
+    """`n_clips` scripts of the command-following benchmark, or random ones of its kind."""
     if collection is not None and collection.is_file():
         features = dataclasses.replace(params.features, input=str(collection))
         scripts = list(benchmark_scripts(dataclasses.replace(params, features=features)).values())
-        if len(scripts) >= N_CLIPS:
-            return scripts[:N_CLIPS], f"the test clips of {collection}"
+        if len(scripts) >= n_clips:
+            return scripts[:n_clips], f"the test clips of {collection}"
     rng = np.random.default_rng(0)
     scripts = []
-    for _ in range(N_CLIPS):
+    for _ in range(n_clips):
         script, total = [], rng.uniform(4.0, 16.0)
         while sum(s.duration for s in script) < total:
             duration = float(rng.uniform(0.5, 3.0))
@@ -77,15 +82,33 @@ def clip_scripts(params, collection: Path | None) -> tuple[list[list], str]:
                 vx, vy, yaw = rng.uniform([-0.6, -0.2, -0.4], [1.0, 0.2, 0.4])
                 script.append(MotionSegment(duration, float(vx), float(vy), float(yaw)))
         scripts.append(script)
-    return scripts, "12 random scripts of 4-16 s (no collection)"
+    return scripts, f"{n_clips} random scripts of 4-16 s (no collection)"
 
 
-def sections(model, layout, stats, params, robot, rows: int, steering: list[bool]) -> None:
-    """One line: microseconds per batch step by section; one 10-s rollout's amortised cost."""
-    script = [MotionSegment(SECONDS, 0.8, 0.0, 0.0)]
+def shortened(script: list, seconds: float) -> list:
+    """The script's first `seconds` (the smoke mode's short rollouts)."""
+    kept, left = [], seconds
+    for segment in script:
+        if left <= 0.0:
+            break
+        kept.append(dataclasses.replace(segment, duration=min(segment.duration, left)))
+        left -= segment.duration
+    return kept
+
+
+def sections(
+    model, layout, stats, params, robot, rows: int, steering: list[bool],
+    seconds: float = SECONDS, repeats: int | None = None,
+) -> None:  # fmt: skip
+    """One line: microseconds per batch step by section; one 10-s rollout's amortised cost.
+
+    `repeats`: passes, the fastest kept (None: 5 for one row, 2 up to 32, else 1)."""
+    script = [MotionSegment(seconds, 0.8, 0.0, 0.0)]
     specs = [RolloutSpec(script, steering[i % len(steering)]) for i in range(rows)]
     best = None
-    for _ in range(5 if rows == 1 else 2 if rows <= 32 else 1):  # best of: the CPU is shared
+    if repeats is None:
+        repeats = 5 if rows == 1 else 2 if rows <= 32 else 1
+    for _ in range(repeats):  # best of: the CPU is shared
         timings: dict[str, float] = {}
         start = time.perf_counter()
         rollouts = generate_batch(
@@ -101,14 +124,14 @@ def sections(model, layout, stats, params, robot, rows: int, steering: list[bool
         if best is None or wall < best[0]:
             best = wall, timings
     wall, timings = best
-    steps = int(SECONDS * layout.rate_hz)
+    steps = int(seconds * layout.rate_hz)
     per_step = [1e6 * timings[name] / steps for name in (*SECTIONS, "record", "write")]
     label = f"{rows:4d} {'steered' if steering == [True] else ('plain' if rows == 1 else 'half')}"
     rollout_s = (wall + timings["write"]) / rows
     print(
         f"{label:12s}" + "".join(f"{v:9.0f}" for v in per_step)
         + f"{1e6 * wall / steps:9.0f} {1e6 * wall / steps / rows:8.0f}"
-        + f"{rollout_s:9.3f} s {SECONDS / rollout_s:6.0f}x"
+        + f"{rollout_s:9.3f} s {seconds / rollout_s:6.0f}x"
     )  # fmt: skip
 
 
@@ -153,10 +176,12 @@ def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3
     print(f"  batched is {alone / batch:.1f}x faster")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--collection", type=Path, default=None)
-    args = parser.parse_args()
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
+    args = parser.parse_args(argv)
+    seconds = 1.0 if args.smoke else SECONDS
     torch.set_num_threads(1)  # as the rollout stage: one process per core
     params = load_params()
     layout = window_layout(params.features, 50.0, "full")
@@ -165,20 +190,26 @@ def main() -> None:
     print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, 1 torch thread; "
           f"MANN {layout.input_dim} -> {layout.output_dim}, {params.model.n_experts} experts, "
           f"hidden {params.model.prediction_hidden}")  # fmt: skip
-    print(f"\nus per batch step by section; a {SECONDS:.0f}-s rollout ({SECONDS * 50:.0f} steps) "
+    print(f"\nus per batch step by section; a {seconds:.0f}-s rollout ({seconds * 50:.0f} steps) "
           "amortised over its batch (writing included)")  # fmt: skip
     print(f"{'batch':12s}" + "".join(f"{n:>9s}" for n in (*SECTIONS, "record", "write"))
           + f"{'step':>9s} {'per row':>8s}{'rollout':>11s} {'RTF':>6s}")  # fmt: skip
-    sections(model, layout, stats, params, robot, 1, [False])
-    sections(model, layout, stats, params, robot, 1, [True])
-    for rows in (8, 32, 128):
-        sections(model, layout, stats, params, robot, rows, [False, True])
+    repeats = 1 if args.smoke else None
+    sections(model, layout, stats, params, robot, 1, [False], seconds, repeats)
+    sections(model, layout, stats, params, robot, 1, [True], seconds, repeats)
+    for rows in (4,) if args.smoke else (8, 32, 128):
+        sections(model, layout, stats, params, robot, rows, [False, True], seconds, repeats)
     collection = args.collection or REPO_ROOT / params.features.input
-    scripts, origin = clip_scripts(params, collection)
-    named = [params.rollout.scenarios[name] for name in params.rollout.scenario_names]
+    scripts, origin = clip_scripts(params, collection, 2 if args.smoke else N_CLIPS)
+    names = params.rollout.scenario_names[:1] if args.smoke else params.rollout.scenario_names
+    named = [params.rollout.scenarios[name] for name in names]
     print(f"\nclip scripts: {origin}")
-    full_set(params, layout, stats, robot, named + scripts)
+    if args.smoke:
+        print(f"smoke: {len(named)} named scenario and {len(scripts)} clip scripts cut to 1 s")
+        named, scripts = ([shortened(s, seconds) for s in group] for group in (named, scripts))
+    full_set(params, layout, stats, robot, named + scripts, repeats=1 if args.smoke else 3)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

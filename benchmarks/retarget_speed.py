@@ -8,6 +8,7 @@ Run with `nice -n 10 python benchmarks/retarget_speed.py [--takes N]`; it prints
 frames (at retarget.rate_hz) per second, per core (wall and CPU time) and with the pool,
 and the projected whole-set time (from the pool's wall time, and from CPU time, which is
 what two free cores would do when the machine is shared).
+`--smoke`: 2 takes (unless `--takes` is given), to check that the benchmark still runs.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import argparse
 import dataclasses
 import functools
 import re
+import sys
 import time
 from multiprocessing import Pool
 
@@ -45,10 +47,13 @@ def with_max_takes(data: DataParams, sample: int | None) -> DataParams:
     return dataclasses.replace(data, sources=sources)
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--takes", type=int, default=12, help="Bandai takes to time (spread)")
-    args = parser.parse_args()
+    parser.add_argument("--takes", type=int, default=None, help="Bandai takes to time (12)")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
+    args = parser.parse_args(argv)
+    if args.takes is None:
+        args.takes = 2 if args.smoke else 12
     params = load_params()
     everything = select_takes(with_max_takes(params.data, None))
     sample = select_takes(with_max_takes(params.data, args.takes))
@@ -84,7 +89,8 @@ def main() -> None:
     # the machine may be shared: CPU time tells what free cores would do
     free = total_frames * cpu / frames / workers
     print(f"projected on {workers} free cores (CPU time): {free:.0f} s ({free / GOAL_S:.2f} x)")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

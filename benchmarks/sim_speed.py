@@ -3,11 +3,15 @@
 Runs the paper's offline controller (0.33x speed, 0.4x step size) on a synthetic stepping
 trajectory and prints: physics alone, the whole loop (IK + feedback + physics), the DCM plan
 time, and the walk's figures (slip, fall, joint tracking).
-Usage: python benchmarks/sim_speed.py [steps] [step_length_m]
+Usage: python -m benchmarks.sim_speed [steps] [step_length_m] [--smoke]
+
+`--smoke`: the same parts with tiny sizes (500 physics steps, a walk of 1 step unless `steps`
+is given), to check that the benchmark still runs.
 """
 
 from __future__ import annotations
 
+import argparse
 import sys
 import time
 
@@ -24,9 +28,14 @@ from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajecto
 from pimann.sim.wbc import standing_pose
 
 
-def main() -> None:
-    steps = int(sys.argv[1]) if len(sys.argv) > 1 else 6
-    length = float(sys.argv[2]) if len(sys.argv) > 2 else 0.3
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("steps", type=int, nargs="?", default=None, help="walk steps (6)")
+    parser.add_argument("length", type=float, nargs="?", default=0.3, help="step length (m)")
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
+    args = parser.parse_args(argv)
+    steps = args.steps if args.steps is not None else 1 if args.smoke else 6
+    length = args.length
     params = load_params().simulate
     robot = load_robot("simulation")
     sim = build_sim_model(params)
@@ -34,7 +43,7 @@ def main() -> None:
 
     data = sim.new_data()
     sim.set_configuration(data, robot, q0)
-    n = 10000
+    n = 500 if args.smoke else 10000
     start = time.perf_counter()
     for _ in range(n):
         mujoco.mj_step(sim.model, data)
@@ -61,7 +70,8 @@ def main() -> None:
         f"{result.joint_rmse:.4f} rad, final sole error "
         f"{abs(result.soles_final - result.soles_planned)[:, :2].max() * 100:.2f} cm"
     )
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -13,13 +13,18 @@ Then, on the whole machine, the 5 seeds of one weight at batch 32 with the PI te
 process with every core's thread against `train.workers` single-threaded processes (what the
 `train` stage does), wall-clock throughput, and the projected cost of the paper-size study.
 
-    python benchmarks/train_step.py [--seconds 4] [--device cpu] [--threads 1]
+    python -m benchmarks.train_step [--seconds 4] [--device cpu] [--threads 1] [--smoke]
+
+`--smoke`: every part with tiny sizes (a MANN of 32 hidden units, 0.05 timed seconds per case,
+a 1000-row refresh, the workers' clocks 1 s after the start), to check that it still runs.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
+import sys
 import time
 
 import numpy as np
@@ -42,6 +47,14 @@ P, PSI = slice(94, 97), slice(97, 100)
 # the paper's size: 150 epochs over the whole walking set (720 clips + mirrors, minus the
 # 2.2 s window at the clip ends, 90% for training: ~254k samples; the paper's data ~200k)
 EPOCHS, SAMPLES = 150, 254_000
+
+
+def model_params(smoke: bool = False):
+    """params `model`; `smoke`: its tiny version (32 hidden units, 8 in the gate)."""
+    params = load_params().model
+    if smoke:
+        params = dataclasses.replace(params, prediction_hidden=32, gating_hidden=8)
+    return params
 
 
 def make_step(model, pi_loss, mean, std, pi_weight, clean: str | None = None):
@@ -102,10 +115,10 @@ def throughputs(steps, ensemble, batch, seconds, device) -> list[float]:
     return best
 
 
-def refresh_rate(device: torch.device, rows: int = 20_000) -> float:
+def refresh_rate(device: torch.device, rows: int = 20_000, smoke: bool = False) -> float:
     """Rows per second (CPU time on the CPU) of one own-rollout refresh, 1 model, the study's
-    layout, clips of 500 frames."""
-    params = load_params()
+    layout, clips of 500 frames (`smoke`: the tiny model)."""
+    params = dataclasses.replace(load_params(), model=model_params(smoke))
     layout = window_layout(params.features, 50.0, "full")
     n_in, n_out = layout.input_dim, layout.output_dim
     identity = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
@@ -125,11 +138,11 @@ def refresh_rate(device: torch.device, rows: int = 20_000) -> float:
     return rows / (clock() - start)
 
 
-def _ensemble_rate(job: tuple[list[int], int, float, float]) -> float:
+def _ensemble_rate(job: tuple[list[int], int, float, float, bool]) -> float:
     """Wall-clock model-samples/s of one PI ensemble of `seeds` (one worker process)."""
-    seeds, threads, seconds, start_at = job
+    seeds, threads, seconds, start_at, smoke = job
     torch.set_num_threads(threads)
-    params = load_params().model
+    params = model_params(smoke)
     pi_loss = PhysicsInformedLoss(load_robot(), dtype=torch.float32)
     generator = torch.Generator().manual_seed(1)
     mean, std = torch.zeros(OUTPUT_DIM), torch.ones(OUTPUT_DIM) * 0.3
@@ -149,16 +162,16 @@ def _ensemble_rate(job: tuple[list[int], int, float, float]) -> float:
     return count * 32 * len(seeds) / (time.perf_counter() - start)
 
 
-def whole_machine(seconds: float) -> None:
+def whole_machine(seconds: float, smoke: bool = False) -> None:
     """The 5 seeds of one weight: one multi-threaded process vs single-threaded workers."""
     cores = os.cpu_count() or 1
     workers = min(load_params().train.workers, cores)
     seeds = list(range(5))
     print(f"whole machine ({cores} cores), 5 seeds, batch 32, MSE + PI, wall clock:")
-    one = _ensemble_rate((seeds, cores, seconds, 0.0))
+    one = _ensemble_rate((seeds, cores, seconds, 0.0, smoke))
     print(f"  1 process x {cores} threads: {one:8.0f} model-samples/s")
-    start_at = time.time() + 15.0  # after every worker has built its model
-    jobs = [(group, 1, seconds, start_at) for group in seed_groups(seeds, workers)]
+    start_at = time.time() + (1.0 if smoke else 15.0)  # after every worker has built its model
+    jobs = [(group, 1, seconds, start_at, smoke) for group in seed_groups(seeds, workers)]
     split = sum(pool_map(_ensemble_rate, jobs, workers, "workers"))
     print(f"  {workers} processes x 1 thread: {split:8.0f} model-samples/s ({split / one:.2f}x)")
     best = max(one, split)
@@ -167,15 +180,18 @@ def whole_machine(seconds: float) -> None:
     print(f"  26 models (5 weights x 5 seeds + baseline): {26 * hours:.1f} h")
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--seconds", type=float, default=4.0, help="timed seconds per case")
+    parser.add_argument("--seconds", type=float, default=None, help="timed seconds per case (4)")
     parser.add_argument("--device", default="cpu")
     parser.add_argument("--threads", type=int, default=1, help="torch CPU threads")
-    args = parser.parse_args()
+    parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
+    args = parser.parse_args(argv)
+    if args.seconds is None:
+        args.seconds = 0.05 if args.smoke else 4.0
     torch.set_num_threads(args.threads)
     device = torch.device(args.device)
-    params = load_params().model
+    params = model_params(args.smoke)
     pi_loss = PhysicsInformedLoss(load_robot(), dtype=torch.float32).to(device)
     generator = torch.Generator().manual_seed(1)
     mean = (torch.randn(OUTPUT_DIM, generator=generator) * 0.1).to(device)
@@ -206,7 +222,7 @@ def main() -> None:
         f"  time over pi_dropout true: two passes {same / two_pass:.2f}x, "
         f"one doubled pass {same / fused:.2f}x (two/one {fused / two_pass:.2f}x)"
     )
-    refresh = refresh_rate(device)
+    refresh = refresh_rate(device, 1000 if args.smoke else 20_000, args.smoke)
     print(
         f"own-rollout refresh (train.rollout_states): {refresh:.0f} rows/s, "
         f"{rates[1, 32][1] / refresh:.2f}x an epoch of PI steps on as many samples"
@@ -222,8 +238,9 @@ def main() -> None:
     print(f"  one model with the PI term: {single:.1f} h")
     print(f"  26-model sweep (5-member ensembles + single baseline): {sweep:.1f} h")
     if device.type == "cpu":
-        whole_machine(args.seconds)
+        whole_machine(args.seconds, args.smoke)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

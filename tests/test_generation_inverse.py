@@ -137,3 +137,33 @@ def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(robot, real_walks, v
             continue  # the baseline's legs, under a yaw-only base, are not the clip's
         drift = np.linalg.norm(positions[:, row, :2] - clip.base_position[frames, :2], axis=1)
         assert drift.max() < 0.1 * travelled, (names[row], drift.max(), travelled)
+
+
+def test_the_data_satisfies_l_b_only_when_paired_over_one_interval(real_walks):
+    """On a real clip with its settled contacts, the data's own L_B pairing sdot_i with the
+    base motion over its own interval (x_i's window sample at offset 0) is far below the
+    paper's pairing, y_i's sample at offset 0, one frame ahead: the leg odometry holds the
+    support foot still over each interval, and the retargeted joints' velocities change from
+    one interval to the next (IK at 50 Hz)."""
+    from pimann.data_report import _training_loss
+    from pimann.features import settled_contacts
+
+    layout = layout_of("full")
+    clip = real_walks["walk"]
+    x, y, steps = clip_features(clip, layout)
+    support = torch.as_tensor(settled_contacts(clip.contacts, 2)[steps])
+    loss = _training_loss(layout)
+    same_interval = y.copy()
+    zero = layout.input_offsets.index(0)
+    for block in ("linear", "angular"):
+        out, inp = layout.y_slices[f"base_{block}_future"], layout.x_slices[f"base_{block}_window"]
+        same_interval[:, out.start : out.start + 3] = x[
+            :, inp.start + 3 * zero : inp.start + 3 * zero + 3
+        ]
+    means = {}
+    for pairing, outputs in (("next_frame", y), ("current", same_interval)):
+        with torch.no_grad():
+            terms = loss.pi_terms(torch.as_tensor(outputs).float())
+            means[pairing] = float(loss.physics(**terms, support=support).mean())
+    assert means["current"] < 0.01
+    assert means["next_frame"] > 20 * means["current"], means

@@ -1,0 +1,1 @@
+"""Timing scripts, each run as `python -m benchmarks.<name>` (`--smoke`: tiny sizes)."""
