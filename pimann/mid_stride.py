@@ -38,18 +38,17 @@ from pimann.command_following import touchdowns
 from pimann.motion_classes import CLASSES, base_motion, classify
 from pimann.params import MotionSegment, Params, load_params
 from pimann.paths import REPO_ROOT
-from pimann.robot import JOINT_NAMES
 from pimann.rollout_layout import model_seeds
 from pimann.rotations import yaw_of
 from pimann.standing import StandingPose
 from pimann.steering import roll_pitch
+from pimann.teacher_forcing import LEG_JOINTS as LEGS
 from pimann.teacher_forcing import add_models_argument, table_over_models
 from pimann.trajectory import Trajectory
 
 if TYPE_CHECKING:
     from pimann.generate import Rollout
 
-LEGS = [k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))]
 SETTLE_S = 2.0  # s left out at the start of each rollout before its speed is measured
 MOVING = ("forward", "backward", "side", "diagonal", "turning")
 
@@ -79,7 +78,11 @@ def achieved(trajectory: Trajectory, command: MotionSegment) -> tuple[float, flo
 
 def _ratio_along(velocity: np.ndarray, command: MotionSegment) -> float:
     """Mean of heading-frame velocities (T, 2) along the command over the command's speed."""
-    wanted = np.array([command.vx, command.vy])
+    return ratio_along(velocity, np.array([command.vx, command.vy]))
+
+
+def ratio_along(velocity: np.ndarray, wanted: np.ndarray) -> float:
+    """Mean of planar velocities (T, 2) along `wanted` (2,) over its norm."""
     speed = float(np.linalg.norm(wanted))
     along = velocity @ (wanted / speed) if speed > 0 else np.zeros(len(velocity))
     return float(along.mean()) / speed

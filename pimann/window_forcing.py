@@ -35,16 +35,17 @@ from pimann.benchmark_clips import held_out_clips, training_clips
 from pimann.command_following import touchdowns
 from pimann.command_script import ScriptSteps
 from pimann.features import clip_features
+from pimann.mid_stride import ratio_along
 from pimann.motion_classes import base_motion, class_counts, majority_class
 from pimann.params import MotionSegment, Params, load_params
 from pimann.paths import REPO_ROOT
-from pimann.robot import JOINT_NAMES, load_robot
+from pimann.robot import load_robot
 from pimann.rollout_layout import model_seeds
 from pimann.standing import StandingPose
+from pimann.teacher_forcing import LEG_JOINTS as LEGS
 from pimann.teacher_forcing import add_models_argument, table_over_models
 from pimann.trajectory import Trajectory
 
-LEGS = [k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))]
 MODES = ("free", "windows")
 
 
@@ -131,11 +132,10 @@ def gait_measures(rollout: Trajectory, data: Trajectory) -> dict[str, float]:
     data_velocity, _ = base_motion(data)
     mean = data_velocity.mean(axis=0)
     speed = float(np.linalg.norm(mean))
-    along = velocity @ (mean / speed) if speed > 0 else np.zeros(len(velocity))
     duration = float(rollout.time[-1] - rollout.time[0]) or 1.0
     error = rollout.joint_positions[:, LEGS] - data.joint_positions[:, LEGS]
     return {
-        "speed_ratio": float(along.mean()) / speed if speed > 0 else float("nan"),
+        "speed_ratio": ratio_along(velocity, mean) if speed > 0 else float("nan"),
         "touchdowns": float(touchdowns(rollout.contacts).mean() * 10.0 / duration),
         "leg_rmse": float(np.sqrt(np.mean(error**2))),
     }
