@@ -360,8 +360,12 @@ class BatchGenerator:
         now_velocity[:, 0], now_velocity[:, 1] = linear[:, now], angular[:, now]
         # in the base frame at k + 1 (as the features write it); kept in the world frame
         self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)  # R v
-        self.joints[rows] = y[:, ys["joints"]]
-        self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
+        joints = y[:, ys["joints"]]
+        if self.params.joint_velocity_feedback == "differenced":
+            self.joint_velocities[rows] = (joints - self.joints[rows]) / self.dt
+        else:
+            self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
+        self.joints[rows] = joints
 
     def _lap(self, section: str) -> None:
         """Charge the time since the previous lap to `section` (a few 0.1 us a call)."""

@@ -145,6 +145,8 @@ class TrainParams:
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
     pi_support: Literal["lower_sole", "data_contacts"]  # which foot L_B keeps still
     pi_gradient: Literal["both", "joints", "base", "joint_velocities"]  # what L_B's gradient moves
+    # weight of the joints' consistency term, added to L_D: ((s - s_true)/dt - (sdot - sdot_true))^2
+    consistency_weight: float
     pi_dropout: bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
     input_noise: float  # std (normalised units) of noise on the fed-back inputs; 0: the paper
     rollout_states: float  # share of samples with own-rollout inputs (pimann.rollout_states)
@@ -191,6 +193,8 @@ class RolloutParams:
     planar_steering: bool  # authors' code: horizontal position error in the yaw frame only
     held_command: Literal["progress", "carrot"]  # how the goal moves while a command holds
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
+    # sdot fed back: the network's sdot_i | (s_i - s_{i-1}) / dt of its predicted joints
+    joint_velocity_feedback: Literal["predicted", "differenced"]
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     start_pose: Literal["data", "robot"]  # standing pose of a start and a stop (standing.py)
     scenarios: dict[str, list[Segment]]

@@ -40,14 +40,28 @@ class TrainingLoss(torch.nn.Module):
         device: torch.device,
         pi_support: str = "lower_sole",
         pi_gradient: str = "both",
+        consistency_weight: float = 0.0,
     ):
         super().__init__()
+        self.consistency_weight = float(consistency_weight)
+        self.dt = 1.0 / float(layout.rate_hz)
         self.layout, self.pi_configuration = layout, pi_configuration
         self.pi_support, self.pi_gradient = pi_support, pi_gradient
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
         self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
         self.to(device)
+
+    def consistency(self, prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """L_C (E,): how far the predicted joints and joint velocities are from agreeing.
+
+        The data satisfy s_i = s_{i-1} + dt sdot_i, so s_{i-1} = s_true - dt sdot_true and the
+        prediction's own disagreement is (s - s_true) / dt - (sdot - sdot_true), in rad/s.
+        """
+        s = self.layout.y_slices
+        error = (prediction - target) * self.y_std
+        gap = error[..., s["joints"]] / self.dt - error[..., s["joint_velocities"]]
+        return gap.square().mean(dim=(-2, -1))
 
     def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
         """Denormalised quantities of y (..., out) that L_B needs, by argument name."""
@@ -82,6 +96,8 @@ class TrainingLoss(torch.nn.Module):
         false: the same inputs without dropout).
         """
         mse = (prediction - target).square().mean(dim=(-2, -1))
+        if self.consistency_weight:
+            mse = mse + self.consistency_weight * self.consistency(prediction, target)
         if not with_pi:
             return mse, torch.zeros_like(mse)
         terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)

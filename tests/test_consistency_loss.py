@@ -1,0 +1,68 @@
+"""The joints' consistency term L_C (train.consistency_weight) on a real retargeted clip.
+
+L_C charges a prediction whose joints and joint velocities disagree, s_i != s_{i-1} + dt sdot_i;
+it needs s_{i-1}, which the output alone gives only because the features are first differences.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from pimann.feature_layout import Normalisation, window_layout
+from pimann.features import clip_features
+from pimann.params import load_params
+from pimann.training_loss import TrainingLoss
+
+PARAMS = load_params()
+
+
+def _loss_and_data(real_walks, weight):
+    layout = window_layout(PARAMS.features, 50.0, "full")
+    x, y, _ = clip_features(real_walks["walk"], layout)
+    scale = y.std(axis=0) + 1.0  # a normalisation that is not the identity
+    stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), scale)
+    loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"), consistency_weight=weight)
+    return loss, layout, x, y, stats
+
+
+def _normalised(y, stats):
+    return torch.as_tensor((y - stats.y_mean) / stats.y_std, dtype=torch.float32)[None]
+
+
+def test_a_consistent_prediction_costs_nothing_and_an_inconsistent_one_the_closed_form(
+    real_walks,
+):
+    loss, layout, x, y, stats = _loss_and_data(real_walks, 1.0)
+    xs, ys, dt = layout.x_slices, layout.y_slices, 1.0 / layout.rate_hz
+    rng = np.random.default_rng(0)
+    # other joint velocities, with the joints that agree with them from the data's s_{i-1}
+    consistent = y.copy()
+    sdot = y[:, ys["joint_velocities"]] + rng.normal(0.0, 0.5, y[:, ys["joint_velocities"]].shape)
+    consistent[:, ys["joint_velocities"]] = sdot
+    consistent[:, ys["joints"]] = x[:, xs["joints"]] + dt * sdot
+    target = _normalised(y, stats)
+    prediction = _normalised(consistent, stats)
+    assert loss.consistency(prediction, target).item() < 1e-6
+    assert (prediction - target).abs().max().item() > 0.1  # the prediction is not the data
+    # joints off by delta with the velocities the data's: L_C = mean (delta / dt)^2
+    delta = rng.normal(0.0, 0.01, y[:, ys["joints"]].shape)
+    shifted = y.copy()
+    shifted[:, ys["joints"]] += delta
+    want = np.mean((delta / dt) ** 2)
+    got = loss.consistency(_normalised(shifted, stats), target).item()
+    assert abs(got - want) < 1e-3 * want
+
+
+def test_the_weight_adds_l_c_to_the_data_term_only(real_walks):
+    plain, _, _, y, stats = _loss_and_data(real_walks, 0.0)
+    weighted, _, _, _, _ = _loss_and_data(real_walks, 2.0)
+    target = _normalised(y, stats)
+    noise = torch.randn(target.shape, generator=torch.Generator().manual_seed(1))
+    prediction = target + 0.05 * noise
+    mse, pi = plain(prediction, target, with_pi=False)
+    mse_c, pi_c = weighted(prediction, target, with_pi=False)
+    extra = weighted.consistency(prediction, target)
+    assert extra.item() > 0.0
+    assert torch.allclose(mse_c, mse + 2.0 * extra)
+    assert pi.item() == pi_c.item() == 0.0
