@@ -1,6 +1,6 @@
 """How fast retargeting runs, and how long the whole walking set would take.
 
-Goal (issue 2): the whole data set (every source of params `data.sources` with no
+Goal: the whole data set (every source of params `data.sources` with no
 max_takes: 720 Bandai Namco walking clips, ~73 min at 30 fps, and the long takes of the
 other sources; originals, whose mirrors are exact joint-space copies) retargets in under
 10 minutes on 2 cores. Times a spread of Bandai Namco takes.

@@ -1,4 +1,4 @@
-"""Command scripts from the data (issue 10's command-following benchmark, beyond the paper).
+"""Command scripts from the data (the command-following benchmark, beyond the paper).
 
 `clip_commands`: a clip's own base motion (pimann.motion_classes.base_motion: planar
 velocity in the heading frame and yaw rate, centred `WINDOW_S` means) cut into

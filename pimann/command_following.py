@@ -1,4 +1,4 @@
-"""Command following (issue 10, beyond the paper): does a rollout do what its script commands?
+"""Command following (beyond the paper): does a rollout do what its script commands?
 
 Command scripts from the data: pimann.clip_commands.
 
@@ -28,7 +28,7 @@ last frame of segment i - 1, to its last frame):
   each), deg.
 
 `summarise_following` takes medians over seeds (each seed's segments of a class averaged
-first) per model, split (where the rows have one), steering and class, and applies the issue's
+first) per model, split (where the rows have one), steering and class, and applies the benchmark's
 criteria to them.
 """
 
@@ -60,7 +60,7 @@ SETTLE_MIN_S = 1.0  # s: the command enters the network's future window over 1.2
 SETTLE_FRACTION = 0.2  # of the segment: 2 s of a 10 s command (speed over its last 8 s)
 DRIFT_WINDOW_S = 2.0  # s: mean over the first and the last 2 s (a few steps each)
 PAPER_FRAMES = 500  # sliding per frame scaled to the paper's 10 s test at 50 Hz
-# the issue's criteria
+# the benchmark's criteria
 SPEED_TOLERANCE = 0.25  # achieved speed along the command within 25% of the commanded
 HEADING_LIMIT_DEG = 10.0  # largest heading error over the segment
 STAND_TRAVEL_M, STAND_TRAVEL_S = 0.05, 5.0  # a stand holds: base moves < 5 cm in 5 s
@@ -84,7 +84,7 @@ def touchdowns(contacts: np.ndarray) -> np.ndarray:
 
 
 def feet_alternate(counts: Sequence[int], moving: bool, duration_s: float = math.inf) -> bool:
-    """Touchdowns per foot differ by at most one (the issue's rule); on a motion the robot
+    """Touchdowns per foot differ by at most one (the benchmark's rule); on a motion the robot
     steps, and each foot touches down once the segment lasts two strides (`STRIDE_S`)."""
     left, right = (int(c) for c in counts)
     if abs(left - right) > 1:
@@ -244,7 +244,7 @@ CRITERIA = ("speed_pass", "heading_pass", "stand_pass", "alternation_pass", "dri
 
 
 def _criteria(row: pd.Series) -> dict[str, bool | None]:
-    """The issue's pass/fail on a class's medians; None where a criterion does not apply."""
+    """The benchmark's pass/fail on a class's medians; None where a criterion does not apply."""
     standing = row["class"] == STANDING
     ratio = row["yaw_rate_ratio"] if row["class"] == "turning_in_place" else row["speed_ratio"]
     drifts = [row[c] for c in ("roll_drift_deg", "pitch_drift_deg", "foot_pitch_drift_deg")]

@@ -1,4 +1,4 @@
-"""The command-following figure (issue 10): commanded against achieved speed per motion class.
+"""The command-following figure: commanded against achieved speed per motion class.
 
 From `pimann.command_following.summarise_following`'s table alone. One panel per steering
 condition (unsteered above), bars of the achieved speed along the command (median over seeds)

@@ -1,4 +1,4 @@
-"""The command-following benchmark in the evaluate stage (issue 10): rollouts -> results/
+"""The command-following benchmark in the evaluate stage: rollouts -> results/
 command_following.csv, command_following.md and command_following.png.
 
 Every rollout (layout: pimann.rollout_layout) is measured against the script it ran (its

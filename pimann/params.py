@@ -119,7 +119,7 @@ class FeaturesParams:
 
 @dataclasses.dataclass(frozen=True)
 class ModelParams:
-    """model: MANN architecture (issue 3)."""
+    """model: MANN architecture (paper Sec. III-B)."""
 
     n_experts: int
     gating_hidden: int
@@ -180,7 +180,7 @@ Segment = MotionSegment | StandSegment  # one command of a script
 
 @dataclasses.dataclass(frozen=True)
 class RolloutParams:
-    """rollout: autoregressive generation and steering (issue 4)."""
+    """rollout: autoregressive generation and steering (paper Sec. III-C)."""
 
     k0: float  # 1/s, steering position gain (Eq. lin_pid)
     k1: float  # 1/s, steering orientation gain (Eq. rot_pid)
@@ -207,7 +207,7 @@ class RolloutParams:
 
 @dataclasses.dataclass(frozen=True)
 class EvaluateParams:
-    """evaluate: metrics (issue 4)."""
+    """evaluate: metrics (paper Sec. IV)."""
 
     contact_on_height: float  # m, lowest sole corner below this -> contact (after the delay)
     contact_off_height: float  # m, above this -> no contact (after the delay)

@@ -1,4 +1,4 @@
-"""Command following (issue 10): scripts from clips, per-segment measures, summary, figure.
+"""Command following: scripts from clips, per-segment measures, summary, figure.
 
 Synthetic trajectories are the standing ergoCub (real FK) moved rigidly as a command says
 (`make_trajectory` of the data report's tests); the stepping check rolls the analytic gait

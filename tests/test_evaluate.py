@@ -1,4 +1,4 @@
-"""Evaluation (issue 4): seed statistics, results and provenance, and the rollout -> evaluate
+"""Evaluation: seed statistics, results and provenance, and the rollout -> evaluate
 path end to end on tiny real models (real MANN, generate, pinocchio)."""
 
 from __future__ import annotations

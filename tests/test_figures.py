@@ -1,4 +1,4 @@
-"""Figures (issue 4) from a crafted results/ folder: every figure is written as PDF and PNG,
+"""Figures from a crafted results/ folder: every figure is written as PDF and PNG,
 records its provenance, and a figure whose data is missing is skipped."""
 
 from __future__ import annotations

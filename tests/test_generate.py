@@ -1,4 +1,4 @@
-"""Autoregressive generation and steering (issue 4): real pinocchio, real generate() code path.
+"""Autoregressive generation and steering: real pinocchio, real generate() code path.
 
 The drift and stop checks use an analytic gait "network": a torch module that maps x to a
 consistent y (a stepping gait whose phase is carried in the input's neck joints and whose

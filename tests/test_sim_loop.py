@@ -1,4 +1,4 @@
-"""Whole-body IK, ZMP-CoM feedback and the closed loop in MuJoCo (issue 5 acceptance test)."""
+"""Whole-body IK, ZMP-CoM feedback and the closed loop in MuJoCo (the closed loop end to end)."""
 
 from __future__ import annotations
 

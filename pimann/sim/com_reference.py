@@ -1,7 +1,7 @@
 """The generated CoM mapped onto the robot's footstep plan: the DCM plan's CoM reference.
 
 The offline DCM/ZMP adjustment keeps the CoM on the linear inverted pendulum; this reference
-keeps it close to the CoM the network generated (issue 5). The generated CoM is taken
+keeps it close to the CoM the network generated. The generated CoM is taken
 relative to the generated feet, not in the world, because the robot walks a rescaled path
 (`step_scale`) at a slower pace (`speed_scale`) from its own standing feet: in world
 coordinates the two CoMs drift apart with every step.
