@@ -119,3 +119,22 @@ def test_workers_push_trainings_that_a_coordinator_restores_without_training(tmp
         assert record["train_precision"] == "float32"
     status = _run(["dvc", "status", *stages], coordinator)
     assert "Data and pipelines are up to date." in status, status
+
+
+WORKER_RECIPE = ["dvc pull features", "dvc repro -s", "dvc push", "dvc push --run-cache"]
+
+
+def test_job_files_cover_the_training_matrix_with_the_worker_recipe():
+    """The Slurm array has one task per training stage of params.yaml's matrix, and both job
+    files run the worker recipe in its order."""
+    import re
+
+    params = load_params(REPO / "params.yaml")
+    slurm = (REPO / "jobs/slurm_train.sh").read_text()
+    (last,) = re.findall(r"^#SBATCH --array=0-(\d+)$", slurm, re.MULTILINE)
+    assert int(last) + 1 == len(params.train.pi_weights) + 1  # train@<w> each, train_baseline
+    skypilot = yaml.safe_load((REPO / "jobs/skypilot_train.yaml").read_text())
+    for name, script in (("slurm", slurm), ("skypilot", skypilot["run"])):
+        at = [script.find(step) for step in WORKER_RECIPE]
+        assert -1 not in at and at == sorted(at), name
+    assert skypilot["envs"]["STAGE"].startswith("train")
