@@ -138,3 +138,14 @@ def test_job_files_cover_the_training_matrix_with_the_worker_recipe():
         at = [script.find(step) for step in WORKER_RECIPE]
         assert -1 not in at and at == sorted(at), name
     assert skypilot["envs"]["STAGE"].startswith("train")
+
+
+def test_every_output_of_a_training_is_cached():
+    """The run-cache covers a stage only when DVC caches all its outputs and plots."""
+    stages = yaml.safe_load((REPO / "dvc.yaml").read_text())["stages"]
+    for name in ("train", "train_baseline"):
+        entries = stages[name]["outs"] + stages[name].get("plots", [])
+        assert len(entries) >= 3, name  # models, stage-time record, loss curves
+        for entry in entries:
+            options = next(iter(entry.values())) if isinstance(entry, dict) else {}
+            assert options.get("cache", True), f"{name}: {entry}"
