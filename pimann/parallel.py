@@ -7,6 +7,7 @@ processes than as one process with several BLAS threads (measured: 1.24x for tra
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
@@ -28,15 +29,22 @@ def usable_cores() -> int:
     return os.cpu_count() or 1
 
 
-def busy_cores(loadavg: Path = Path("/proc/loadavg")) -> int:
-    """Other processes running right now (the kernel's runnable count less this one); 0 where
-    the count is not readable. A snapshot: two runs started in the same instant miss each
-    other, which PIMANN_THREADS or taskset settles."""
-    try:
-        running = int(loadavg.read_text().split()[3].split("/")[0])
-    except (OSError, ValueError, IndexError):
-        return 0
-    return max(0, running - 1)
+def busy_cores(
+    loadavg: Path = Path("/proc/loadavg"), samples: int = 5, interval_s: float = 0.05
+) -> int:
+    """Other processes running now: the kernel's runnable count less this one, the least of
+    a few reads `interval_s` apart (a momentary wake-up is no busy core); 0 where the count
+    is not readable. A snapshot: two runs started in the same instant miss each other, which
+    PIMANN_THREADS or taskset settles."""
+    counts = []
+    for k in range(samples):
+        if k:
+            time.sleep(interval_s)
+        try:
+            counts.append(int(loadavg.read_text().split()[3].split("/")[0]))
+        except (OSError, ValueError, IndexError):
+            return 0
+    return max(0, min(counts) - 1)
 
 
 def free_cores(usable: int, busy: int) -> int:
