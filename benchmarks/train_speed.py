@@ -4,7 +4,11 @@ Prints the time per step and per 1000 training samples (batch 32) for an ensembl
 `--members` seeds, so one full model (150 epochs) can be estimated from the sample count:
 hours = 150 * samples / 1000 * (seconds per 1000 samples) / 3600.
 
-    python -m benchmarks.train_speed [--device cuda] [--members 5] [--steps 30] [--smoke]
+    python -m benchmarks.train_speed [--device cuda] [--members 5] [--steps 30]
+        [--precision float32|bfloat16|auto] [--smoke]
+
+`--precision`: the network's products in that precision, as train.precision (auto: bfloat16
+where the hardware has it).
 
 `--smoke`: the same steps with tiny sizes (2 members of a MANN with 32 hidden units, 2 timed
 steps after 1 warm-up step), to check that the benchmark still runs.
@@ -23,7 +27,7 @@ import torch
 from pimann.feature_layout import Normalisation, window_layout
 from pimann.mann import MANN
 from pimann.params import load_params
-from pimann.train import pick_device
+from pimann.train import autocast, pick_device, pick_precision
 from pimann.training_loss import TrainingLoss
 
 
@@ -32,6 +36,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--device", default="auto")
     parser.add_argument("--members", type=int, default=None, help="ensemble members (5)")
     parser.add_argument("--steps", type=int, default=None, help="timed steps (30)")
+    parser.add_argument("--precision", choices=("float32", "bfloat16", "auto"), default="float32")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
     args = parser.parse_args(argv)
     if args.members is None:
@@ -44,6 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.smoke:
         model_params = dataclasses.replace(model_params, prediction_hidden=32, gating_hidden=8)
     device = pick_device(args.device)
+    precision = pick_precision(args.precision, device)
     layout = window_layout(params.features, 50.0, "full")
     rng = np.random.default_rng(0)
     raw_y = rng.normal(size=(1000, layout.output_dim)) * 0.1
@@ -62,7 +68,9 @@ def main(argv: list[str] | None = None) -> int:
                 if device.type == "cuda":
                     torch.cuda.synchronize()
                 start = time.perf_counter()
-            mse, pi = loss_fn(model(x), y, weight != 0.0)
+            with autocast(device, precision):
+                prediction = model(x)
+            mse, pi = loss_fn(prediction.float(), y, weight != 0.0)
             optimizer.zero_grad()
             (mse + weight * pi).sum().backward()
             optimizer.step()
@@ -70,7 +78,7 @@ def main(argv: list[str] | None = None) -> int:
             torch.cuda.synchronize()
         per_step = (time.perf_counter() - start) / args.steps
         print(
-            f"{device.type} w={weight:g} members={args.members} batch={batch}: "
+            f"{device.type} {precision} w={weight:g} members={args.members} batch={batch}: "
             f"{per_step * 1e3:.1f} ms/step, {per_step * 1000 / batch:.2f} s per 1000 samples "
             f"(all {args.members} members), threads={torch.get_num_threads()}"
         )

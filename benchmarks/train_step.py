@@ -2,8 +2,10 @@
 
 Random data of the study's sizes (input 130, output 100), one AdamW step per batch, for a
 single MANN and a 5-member ensemble, at batch 32 and 256. Prints samples/s (model-samples:
-an ensemble step trains E models on B samples each), the PI/plain time ratio (goal <= 1.3)
-and projected wall time of one full-size model and of the 26-model sweep on this machine.
+an ensemble step trains E models on B samples each), the PI/plain time ratio (goal <= 1.3),
+the PI step in bfloat16 (train.precision: the products under autocast, the losses float32)
+beside it with the bf16/float32 time ratio, and projected wall time of one full-size model
+and of the 26-model sweep on this machine in both precisions.
 
 Then the cost of train.rollout_states: one refresh of every member's own-rollout inputs
 (pimann.rollout_states, once an epoch, 50-frame pieces) against one epoch of PI steps on as
@@ -37,7 +39,7 @@ from pimann.params import load_params
 from pimann.physics_loss import PhysicsInformedLoss
 from pimann.robot import load_robot
 from pimann.rollout_states import OwnRollouts
-from pimann.train import seed_groups
+from pimann.train import autocast, cpu_has_bf16, seed_groups
 
 INPUT_DIM, OUTPUT_DIM = 130, 100
 # output layout used here only to feed the PI loss: 7 future base linear and 7 angular
@@ -57,20 +59,27 @@ def model_params(smoke: bool = False):
     return params
 
 
-def make_step(model, pi_loss, mean, std, pi_weight, clean: str | None = None):
+def make_step(
+    model, pi_loss, mean, std, pi_weight, clean: str | None = None, precision: str = "float32"
+):
     """One AdamW step; `clean` (train.pi_dropout: false): L_B on the dropout-free prediction,
-    from a second eval-mode pass ("two_pass") or one doubled pass ("fused", what train does)."""
+    from a second eval-mode pass ("two_pass") or one doubled pass ("fused", what train does);
+    `precision` bfloat16: the network under autocast, as pimann.train runs it."""
     optimiser = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=0.0025, fused=True)
+    device = next(model.parameters()).device
 
     def step(x, y):
         pi_prediction = None
-        if clean == "fused":
-            prediction, pi_prediction = model.forward_with_clean(x)
-        else:
-            prediction = model(x)
-        if clean == "two_pass":
-            pi_prediction = model.eval()(x)
-            model.train()
+        with autocast(device, precision):
+            if clean == "fused":
+                prediction, pi_prediction = model.forward_with_clean(x)
+            else:
+                prediction = model(x)
+            if clean == "two_pass":
+                pi_prediction = model.eval()(x)
+                model.train()
+        prediction = prediction.float()
+        pi_prediction = None if pi_prediction is None else pi_prediction.float()
         loss = (prediction - y).square().mean(dim=(-2, -1)).sum()  # summed over members
         if pi_weight:
             pi_prediction = prediction if pi_prediction is None else pi_prediction
@@ -196,21 +205,29 @@ def main(argv: list[str] | None = None) -> int:
     generator = torch.Generator().manual_seed(1)
     mean = (torch.randn(OUTPUT_DIM, generator=generator) * 0.1).to(device)
     std = (torch.rand(OUTPUT_DIM, generator=generator) * 0.5 + 0.1).to(device)
-    print(f"device {device}, torch threads {torch.get_num_threads()}, float32")
+    fast_bf16 = cpu_has_bf16() if device.type == "cpu" else torch.cuda.is_bf16_supported()
+    print(
+        f"device {device}, torch threads {torch.get_num_threads()}, "
+        f"bf16 in hardware: {'yes' if fast_bf16 else 'no'}"
+    )
     print(
         f"{'models':>7} {'batch':>6} {'plain samples/s':>16} {'PI samples/s':>13} {'PI/plain':>9}"
+        f" {'PI bf16 samples/s':>18} {'bf16/f32 time':>14}"
     )
     rates = {}
     for ensemble in (1, 5):
         for batch in (32, 256):
             steps = []
-            for pi_weight in (0.0, 10.0):
+            for pi_weight, precision in ((0.0, "float32"), (10.0, "float32"), (10.0, "bfloat16")):
                 torch.manual_seed(0)
                 model = MANN(INPUT_DIM, OUTPUT_DIM, params, ensemble=ensemble).to(device).train()
-                steps.append(make_step(model, pi_loss, mean, std, pi_weight))
+                steps.append(make_step(model, pi_loss, mean, std, pi_weight, None, precision))
             rates[ensemble, batch] = row = throughputs(steps, ensemble, batch, args.seconds, device)
-            plain, pi = row
-            print(f"{ensemble:>7} {batch:>6} {plain:>16.0f} {pi:>13.0f} {plain / pi:>9.2f}")
+            plain, pi, pi_bf16 = row
+            print(
+                f"{ensemble:>7} {batch:>6} {plain:>16.0f} {pi:>13.0f} {plain / pi:>9.2f}"
+                f" {pi_bf16:>18.0f} {pi / pi_bf16:>14.2f}"
+            )
     print("L_B on the dropout-free prediction (train.pi_dropout: false), 1 model, batch 32:")
     steps = []
     for clean in (None, "two_pass", "fused"):
@@ -231,12 +248,15 @@ def main(argv: list[str] | None = None) -> int:
     single = model_epochs / rates[1, 32][1] / 3600
     # sweep: 26 models = 5 PI weights x 5 seeds (one 5-member ensemble per weight; w = 0 runs
     # without the PI term) + the ground-projected baseline (one model, no PI term)
-    plain5, pi5 = rates[5, 32]
+    plain5, pi5, _ = rates[5, 32]
     sweep = (5 * model_epochs / plain5 + 4 * 5 * model_epochs / pi5) / 3600
     sweep += model_epochs / rates[1, 32][0] / 3600
-    print(f"projected, {EPOCHS} epochs x {SAMPLES} samples at batch 32:")
-    print(f"  one model with the PI term: {single:.1f} h")
-    print(f"  26-model sweep (5-member ensembles + single baseline): {sweep:.1f} h")
+    sweep_bf16 = sweep * rates[5, 32][1] / rates[5, 32][2]  # the PI steps' ratio for all
+    print(f"projected, {EPOCHS} epochs x {SAMPLES} samples at batch 32, one process:")
+    print(f"  one model with the PI term: {single:.1f} h float32, "
+          f"{single * rates[1, 32][1] / rates[1, 32][2]:.1f} h bfloat16")  # fmt: skip
+    print(f"  26-model sweep (5-member ensembles + single baseline): {sweep:.1f} h float32, "
+          f"{sweep_bf16:.1f} h bfloat16")  # fmt: skip
     if device.type == "cpu":
         whole_machine(args.seconds, args.smoke)
     return 0

@@ -106,19 +106,21 @@ class MANN(nn.Module):
     def _dropout(self, h: torch.Tensor, rows: int | None = None) -> torch.Tensor:
         """Inverted dropout on the first `rows` samples of the batch (None: all of them).
 
-        A uniform draw and a compare cost half of torch's bernoulli_.
+        A uniform draw and a compare cost half of torch's bernoulli_. The draw is float32
+        whatever h's dtype (bfloat16 under autocast), so both precisions drop the same units.
         """
         if not self.training or self.dropout == 0.0:
             return h
         shape = h.shape[1:] if rows is None else (rows,) + h.shape[2:]
+        dtype = torch.promote_types(h.dtype, torch.float32)  # bfloat16 draws in float32
         if self.dropout_generators is None:
-            noise = torch.rand((h.shape[0],) + shape, device=h.device, dtype=h.dtype)
+            noise = torch.rand((h.shape[0],) + shape, device=h.device, dtype=dtype)
         else:
             noise = torch.stack([
-                torch.rand(shape, generator=g, device=h.device, dtype=h.dtype)
+                torch.rand(shape, generator=g, device=h.device, dtype=dtype)
                 for g in self.dropout_generators
             ])  # fmt: skip
-        mask = (noise >= self.dropout) * (1.0 / (1.0 - self.dropout))
+        mask = ((noise >= self.dropout) * (1.0 / (1.0 - self.dropout))).to(h.dtype)
         if rows is not None:
             mask = torch.cat(
                 [mask, mask.new_ones((h.shape[0], h.shape[1] - rows) + h.shape[2:])], 1

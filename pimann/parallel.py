@@ -7,17 +7,69 @@ processes than as one process with several BLAS threads (measured: 1.24x for tra
 from __future__ import annotations
 
 import os
+import time
 from collections.abc import Callable, Iterable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
+from pathlib import Path
 
+from pimann.errors import PimannError
 from pimann.logs import logging_levels, worker_logging
 from pimann.progress import track
 
+# the torch threads of a training, overriding train.threads: e.g. PIMANN_THREADS=1 for each
+# of `dvc queue start -j 2` on two cores
+THREADS_ENV = "PIMANN_THREADS"
+
+
+def usable_cores() -> int:
+    """The cores this process may run on: its affinity (taskset, a Slurm or container cpuset)."""
+    if hasattr(os, "sched_getaffinity"):
+        return max(1, len(os.sched_getaffinity(0)))
+    return os.cpu_count() or 1
+
+
+def busy_cores(
+    loadavg: Path = Path("/proc/loadavg"), samples: int = 5, interval_s: float = 0.05
+) -> int:
+    """Other processes running now: the kernel's runnable count less this one, the least of
+    a few reads `interval_s` apart (a momentary wake-up is no busy core); 0 where the count
+    is not readable. A snapshot: two runs started in the same instant miss each other, which
+    PIMANN_THREADS or taskset settles."""
+    counts = []
+    for k in range(samples):
+        if k:
+            time.sleep(interval_s)
+        try:
+            counts.append(int(loadavg.read_text().split()[3].split("/")[0]))
+        except (OSError, ValueError, IndexError):
+            return 0
+    return max(0, min(counts) - 1)
+
+
+def free_cores(usable: int, busy: int) -> int:
+    """The usable cores not taken by the busy ones, at least one."""
+    return max(1, usable - busy)
+
 
 def cpu_workers(requested: int) -> int:
-    """`requested` processes, at most one per core, at least one."""
-    return max(1, min(requested, os.cpu_count() or 1))
+    """`requested` processes, at most one per usable core, at least one."""
+    return max(1, min(requested, usable_cores()))
+
+
+def training_threads(setting: int | str) -> int:
+    """Torch threads of a training: PIMANN_THREADS, else `setting` (train.threads), where
+    `auto` takes the usable cores that other running processes leave free. Torch's own
+    default (every core) makes two trainings started together 8x slower than one thread
+    each on two cores."""
+    raw = os.environ.get(THREADS_ENV, "").strip()
+    if raw:
+        if not raw.isdigit() or int(raw) < 1:
+            raise PimannError(None, f"{THREADS_ENV} must be a whole number >= 1, not {raw!r}")
+        return int(raw)
+    if setting == "auto":
+        return free_cores(usable_cores(), busy_cores())
+    return int(setting)
 
 
 def pool_map(

@@ -155,6 +155,10 @@ class TrainParams:
     eval_batch_size: int  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]
     workers: int  # CPU processes the seeds are split among (no effect on the result)
+    # the network's products under autocast in bfloat16, or float32; auto: bfloat16 where the
+    # hardware has it (pimann.train.pick_precision)
+    precision: Literal["float32", "bfloat16", "auto"]
+    threads: int | Literal["auto"]  # torch threads in all; auto: the free cores (no effect)
 
 
 @dataclasses.dataclass(frozen=True)

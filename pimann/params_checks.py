@@ -89,6 +89,7 @@ RANGES: dict[str, Bound] = {
     "train.max_train_samples": AT_LEAST_ONE,
     "train.eval_batch_size": AT_LEAST_ONE,
     "train.workers": AT_LEAST_ONE,
+    "train.threads": AT_LEAST_ONE,
     "rollout.k0": NON_NEGATIVE,
     "rollout.k1": NON_NEGATIVE,
     "rollout.goal_factor": POSITIVE,

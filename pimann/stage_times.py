@@ -26,6 +26,15 @@ SUMMARY_FILE = "stage_times.json"  # in results/, written by the report stage
 GATHERING_STAGE = "report"
 
 
+# what a stage tells its record beyond the wall time (e.g. the training's precision)
+_NOTES: dict[str, Any] = {}
+
+
+def note(key: str, value: Any) -> None:
+    """Add `key: value` to this process's stage-time record (the last value of a key wins)."""
+    _NOTES[key] = value
+
+
 def _iso(seconds: float) -> str:
     return datetime.fromtimestamp(seconds, UTC).isoformat(timespec="seconds")
 
@@ -54,6 +63,7 @@ def stage_record(
         "cpus": usable,  # the cores the stage could run on
         "cpu_count": os.cpu_count(),  # the machine's
         **_torch_device(),
+        **_NOTES,
     }
 
 
