@@ -1,6 +1,6 @@
 """The simulate stage's work: chosen rollouts walked in MuJoCo, one result file each, a summary.
 
-results/sim/<model>-<seed>-<scenario>-<steering|nosteering>.h5   (pimann.sim.results)
+results/sim/<model>-<seed>-<scenario>-<steering|nosteering>[-online].h5   (pimann.sim.results)
 results/sim/<same name>.mp4                                       (runs marked `video`)
 summary JSON: per run the summary figures, plus the profile and the params used
 """
@@ -28,7 +28,9 @@ log = logging.getLogger(__name__)
 
 
 def run_name(run: SimulateRun) -> str:
-    return f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+    """The offline controller's runs keep their names; the online one's gain `-online`."""
+    name = f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+    return name if run.controller == "offline" else f"{name}-{run.controller}"
 
 
 def _json_ready(value: Any) -> Any:
@@ -67,12 +69,13 @@ def simulate_runs(
         for run, path in track(jobs, "simulate", "runs", logger=log):
             name = run_name(run)
             provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
-                          "steering": run.steering, "rollout": repo_relative(path)}  # fmt: skip
+                          "steering": run.steering, "controller": run.controller,
+                          "rollout": repo_relative(path)}  # fmt: skip
             try:
                 with about(path, f"simulate run {name}"):
                     trajectory = read_trajectory(path)
                     log.debug("%s: %.1f s generated", name, trajectory.time[-1])
-                    result = simulate_trajectory(trajectory, sim)
+                    result = simulate_trajectory(trajectory, sim, controller=run.controller)
             except PimannError as error:  # recorded, the other runs go on
                 log.warning("%s", error)
                 runs[name] = {**provenance, "success": False, "failed": str(error)}
