@@ -255,6 +255,29 @@ class MpcParams:
 
 
 @dataclasses.dataclass(frozen=True)
+class PushRollout:
+    """A rollout the push-recovery study walks: results/rollouts/<model>/<seed>/<scenario>-..."""
+
+    model: str
+    seed: int
+    scenario: str
+    steering: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class PushParams:
+    """simulate.pushes: push recovery, the largest push survived bisected per controller."""
+
+    rollouts: list[PushRollout]  # empty: no push study
+    controllers: list[Literal["offline", "online"]]
+    directions: list[Literal["lateral", "forward"]]
+    duration_s: float = 0.1  # s, the push's length, centred on mid single support
+    max_force: float = 300.0  # N, the bisection's upper end
+    tolerance: float = 20.0  # N, the bisection stops when the bracket is this narrow
+    recovery_s: float = 1.5  # s after the push the base must stay up
+
+
+@dataclasses.dataclass(frozen=True)
 class SimulateParams:
     """simulate: MuJoCo model, footsteps, DCM/ZMP adjustment, whole-body QP IK (SPEC 9)."""
 
@@ -293,6 +316,7 @@ class SimulateParams:
     video_width: int
     video_height: int
     mpc: MpcParams  # the online controller
+    pushes: PushParams  # push recovery (results/sim/pushes.png, the summary's `pushes`)
     runs: list[SimulateRun]  # the simulate stage's runs
 
 

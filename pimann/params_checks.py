@@ -134,6 +134,11 @@ RANGES: dict[str, Bound] = {
     "simulate.mpc.*_weight": NON_NEGATIVE,
     "simulate.mpc.*_weight.*": NON_NEGATIVE,
     "simulate.mpc.max_iterations": AT_LEAST_ONE,
+    "simulate.pushes.duration_s": POSITIVE,
+    "simulate.pushes.max_force": POSITIVE,
+    "simulate.pushes.tolerance": POSITIVE,
+    "simulate.pushes.recovery_s": POSITIVE,
+    "simulate.pushes.rollouts.*.seed": NON_NEGATIVE,
     "figures.drift_reduction": Bound(0.0, 1.0, closed_low=False),
     "figures.width_in": POSITIVE,
     "figures.font_pt": POSITIVE,
@@ -224,6 +229,14 @@ def check_references(params: Any, source: Path) -> None:
             raise PimannError(source, f"simulate.mpc.{key} must have 3 entries (x, y, z)")
     if mpc.horizon_s < 2 * mpc.dt:
         raise PimannError(source, "simulate.mpc.horizon_s must span at least 2 knots of dt")
+    for k, run in enumerate(params.simulate.pushes.rollouts):
+        key = f"simulate.pushes.rollouts[{k}]"
+        if run.model not in model_names(params):
+            raise _unknown(source, f"{key}.model", run.model, model_names(params))
+        if run.seed not in params.train.seeds:
+            raise _unknown(source, f"{key}.seed", run.seed, params.train.seeds)
+        if run.scenario not in rolled_out:
+            raise _unknown(source, f"{key}.scenario", run.scenario, rolled_out)
     for k, run in enumerate(params.simulate.runs):
         key = f"simulate.runs[{k}]"
         if run.model not in model_names(params):

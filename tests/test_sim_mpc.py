@@ -197,8 +197,9 @@ def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot,
     path.parent.mkdir(parents=True)
     write_trajectory(path, walk)
     unsolvable = dataclasses.replace(sim_params.mpc, com_z_min=0.9, com_z_max=0.95)
+    no_pushes = dataclasses.replace(sim_params.pushes, rollouts=[])
     short = dataclasses.replace(sim_params, runs=runs, mpc=unsolvable, zmp_hold_s=0.3,
-                                end_hold_s=0.2)  # fmt: skip
+                                end_hold_s=0.2, pushes=no_pushes)  # fmt: skip
     params = dataclasses.replace(load_params(), simulate=short)
     record = simulate_runs(rollouts, tmp_path / "sim", tmp_path / "summary.json", params)
     assert record["failed_runs"] == ["w10-0-forward-steering-online"]
@@ -212,3 +213,55 @@ def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot,
         "w10-0-forward-steering-online"
     ]
     assert (tmp_path / "sim" / "w10-0-forward-steering.h5").is_file()
+
+
+def test_bisection_finds_the_threshold_from_below():
+    from pimann.sim.pushes import largest_survived
+
+    tried = []
+
+    def survives(force: float) -> bool:
+        tried.append(force)
+        return force <= 123.0
+
+    found = largest_survived(survives, 300.0, 5.0)
+    assert 118.0 <= found <= 123.0 and tried[0] == 300.0
+    assert largest_survived(lambda force: True, 300.0, 5.0) == 300.0
+    assert largest_survived(lambda force: False, 300.0, 5.0) < 5.0
+
+
+def test_pushes_point_where_they_should():
+    """Lateral: toward the swing foot's side; forward: along the stance heading; mid swing."""
+    from pimann.sim.pushes import push_at_mid_single_support
+
+    plan = stepping_plan(FEET, 2, 0.2)  # the right foot swings first, 0.5 s to 1.2 s
+    lateral = push_at_mid_single_support(plan, "lateral", 100.0, 0.1)
+    np.testing.assert_allclose(lateral.force, [0.0, -100.0, 0.0], atol=1e-9)
+    assert lateral.start == pytest.approx(0.85 - 0.05)
+    np.testing.assert_allclose(lateral.at(0.85), lateral.force)
+    np.testing.assert_allclose(lateral.at(0.95), 0.0)
+    forward = push_at_mid_single_support(plan, "forward", 50.0, 0.1)
+    np.testing.assert_allclose(forward.force, [50.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
+    """The offline controller in MuJoCo: 0 N walks on, a 400 N lateral push knocks it over."""
+    from pimann.sim.footsteps import extract_footsteps
+    from pimann.sim.pushes import push_at_mid_single_support
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    q0 = standing_pose(sim_robot, sim_params)
+    source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
+    walk = stepping_trajectory(sim_robot, fast, source)
+    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    outcomes = []
+    for force in (0.0, 400.0):
+        push = push_at_mid_single_support(plan, "lateral", force, 0.1)
+        result = simulate_trajectory(walk, fast, push.start + 1.5, "offline", push)
+        outcomes.append(result.fallen)
+    assert outcomes == [False, True]
