@@ -265,3 +265,32 @@ def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
         result = simulate_trajectory(walk, fast, push.start + 1.5, "offline", push)
         outcomes.append(result.fallen)
     assert outcomes == [False, True]
+
+
+def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params):
+    """MuJoCo, 60 N for 0.1 s toward the swing foot: its landing moves out, the robot stays up."""
+    from pimann.sim.footsteps import extract_footsteps
+    from pimann.sim.pushes import push_at_mid_single_support
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    q0 = standing_pose(sim_robot, sim_params)
+    source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
+    walk = stepping_trajectory(sim_robot, fast, source)
+    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    swing = int(np.argmin([plan.feet[s].t_off[0] for s in (0, 1)]))
+    landings = []
+    for force in (0.0, 60.0):
+        push = push_at_mid_single_support(plan, "lateral", force, 0.1)
+        result = simulate_trajectory(walk, fast, push.start + 0.6, "online", push)
+        assert not result.fallen
+        landings.append(result.footsteps.feet[swing].positions[1].copy())
+    outward = np.array([0.0, 1.0 if swing == 0 else -1.0])
+    assert (landings[1] - landings[0]) @ outward > 0.005
+    box = landing_box(sim_params.mpc, swing)
+    offset = landings[1] - plan.feet[swing].positions[1]
+    assert box[1, 0] - 1e-6 <= offset[1] <= box[1, 1] + 1e-6

@@ -4,7 +4,8 @@ The push (`simulate.pushes.duration_s`, on the base through MuJoCo's `xfrc_appli
 centred on the middle of the first single support; lateral pushes point to the swing foot's
 side (where the landing box lets the online controller step out), forward ones along the
 stance foot's heading. A trial survives when the base stays above `fall_height` until
-`recovery_s` after the push (the rest of the walk is not simulated).
+`recovery_s` after the push (the rest of the walk is not simulated). An MPC that finds no
+solution after the push counts as a fall.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from pimann.errors import PimannError
 from pimann.params import SimulateParams
 from pimann.robot import load_robot
 from pimann.rotations import rot_z
@@ -82,7 +84,11 @@ def push_recovery(
             def survives(force: float, controller: str = controller, direction: str = direction):
                 push = push_at_mid_single_support(plan, direction, force, settings.duration_s)
                 until = push.start + push.duration + settings.recovery_s
-                result = simulate_trajectory(trajectory, params, until, controller, push)
+                try:
+                    result = simulate_trajectory(trajectory, params, until, controller, push)
+                except PimannError as error:  # the MPC found no way to recover: a fall
+                    log.debug("%s %s %.0f N: %s", controller, direction, force, error.problem)
+                    return False
                 log.debug("%s %s %.0f N: %s", controller, direction, force,
                           "fell" if result.fallen else "survived")  # fmt: skip
                 return not result.fallen
