@@ -149,8 +149,8 @@ def test_a_frozen_footstep_does_not_move(mpc):
 
 
 def test_an_unsolvable_horizon_is_an_error():
-    """CoM height bounds the measured CoM cannot reach in one knot: ipopt's status is named."""
-    params = dataclasses.replace(MpcParams(), com_z_min=0.9, com_z_max=0.95)
+    """CoM height bounds out of the forces' reach by knot 2 (5 m up): ipopt's status is named."""
+    params = dataclasses.replace(MpcParams(), com_z_min=5.0, com_z_max=5.1)
     problem = _problem(stepping_plan(FEET, 0, 0.0), 0.0, params)
     with pytest.raises(PimannError, match="centroidal MPC not solved \\(ipopt: Infeasible"):
         CentroidalMPC(params).solve(problem)
@@ -196,7 +196,7 @@ def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot,
     path = rollout_path(rollouts, RolloutKey("w10", 0, "forward", True))
     path.parent.mkdir(parents=True)
     write_trajectory(path, walk)
-    unsolvable = dataclasses.replace(sim_params.mpc, com_z_min=0.9, com_z_max=0.95)
+    unsolvable = dataclasses.replace(sim_params.mpc, com_z_min=5.0, com_z_max=5.1)
     no_pushes = dataclasses.replace(sim_params.pushes, rollouts=[])
     short = dataclasses.replace(sim_params, runs=runs, mpc=unsolvable, zmp_hold_s=0.3,
                                 end_hold_s=0.2, pushes=no_pushes)  # fmt: skip
