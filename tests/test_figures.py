@@ -178,9 +178,10 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
     root = crafted_results(tmp_path / "results", params)
     sim = root / "sim"
     shutil.copy(sim / "mixed.h5", sim / "w10-0-mixed-steering.h5")
-    with h5py.File(sim / "mixed.h5", "r") as source, h5py.File(
-        sim / "w10-0-mixed-steering-online.h5", "w"
-    ) as file:
+    with (
+        h5py.File(sim / "mixed.h5", "r") as source,
+        h5py.File(sim / "w10-0-mixed-steering-online.h5", "w") as file,
+    ):
         for key in ("time", "joints_reference", "joints_generated"):
             file[key] = source[key][()]
         file["joints_measured"] = source["joints_reference"][()] + 0.05  # tracks worse
