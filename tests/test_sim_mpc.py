@@ -294,3 +294,21 @@ def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params)
     box = landing_box(sim_params.mpc, swing)
     offset = landings[1] - plan.feet[swing].positions[1]
     assert box[1, 0] - 1e-6 <= offset[1] <= box[1, 1] + 1e-6
+
+
+def test_cli_simulates_with_the_online_controller(tmp_path, capsys, sim_robot, sim_params):
+    from pimann.cli import main
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+    from pimann.trajectory import write_trajectory
+
+    q0 = standing_pose(sim_robot, sim_params)
+    plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
+    source = tmp_path / "walk.h5"
+    write_trajectory(source, stepping_trajectory(sim_robot, sim_params, plan, 25.0))
+    argv = ["simulate", str(source), "-o", str(tmp_path / "sim.h5"), "--duration", "0.6",
+            "--controller", "online"]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["controller"] == "online" and not summary["fallen"]
+    assert summary["mpc_solve_median_s"] > 0 and summary["simulated_s"] == pytest.approx(0.6)
