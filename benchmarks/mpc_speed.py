@@ -3,10 +3,11 @@
 Walks a synthetic stepping plan with the MPC alone (each solve starts from the previous
 solution's next knot, warm started), on one thread, for every solver casadi ships that takes
 this nonlinear problem: ipopt (MUMPS), sqpmethod with each QP solver, fatrop. Prints per
-solver the median and 95th percentile per solve against the period, the failures, and how far
+solver the median and 95th percentile per solve against the period (wall time, and this
+process's CPU time: on a shared machine the wall time includes waiting), the failures, and how far
 its solutions lie from ipopt's (the same problem solved: CoM and footsteps agree). Without
 `--smoke` it also times the MuJoCo closed loop with the online controller (real-time factor).
-Usage: python -m benchmarks.mpc_speed [solves] [--budget seconds per solver] [--smoke]
+Usage: python -m benchmarks.mpc_speed [solves] [--budget S] [--solvers ipopt,...] [--smoke]
 
 `--smoke`: a 4-knot horizon, 3 solves, no closed loop: checks that the benchmark still runs.
 """
@@ -76,7 +77,7 @@ def solver_options() -> dict[str, tuple[str, dict]]:
 
 def _walk(
     mpc: CentroidalMPC, solves: int, params: MpcParams, budget_s: float
-) -> tuple[list[float], list, str]:
+) -> tuple[list[float], list[float], list, str]:
     """Solve `solves` horizons along the plan, each from the last solution's next knot.
 
     A solver that has spent `budget_s` stops early (the table says after how many solves).
@@ -85,7 +86,7 @@ def _walk(
     nominal = tuple(f.positions.copy() for f in plan.feet)
     reference = np.tile([0.0, 0.0, 0.7], (knot_count(params) + 1, 1))
     com, velocity, angular = np.array([0.0, 0.0, 0.7]), np.zeros(3), np.zeros(3)
-    times, solutions, failure = [], [], ""
+    times, cpu, solutions, failure = [], [], [], ""
     mpc.previous = None
     for k in range(solves):
         if sum(times) > budget_s:
@@ -100,10 +101,11 @@ def _walk(
             failure = f"t = {t:.2f} s: {error.problem}"
             break
         times.append(solution.solve_s)
+        cpu.append(solution.solve_cpu_s)
         solutions.append(solution)
         com, velocity = solution.com[1], solution.com_velocity[1]
         angular = solution.angular_momentum[1]
-    return times, solutions, failure
+    return times, cpu, solutions, failure
 
 
 def _closed_loop_rtf(steps: int) -> tuple[float, float, bool]:
@@ -127,6 +129,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("solves", type=int, nargs="?", default=None, help="solves (40)")
     parser.add_argument("--budget", type=float, default=60.0, help="s of solving per solver")
+    parser.add_argument("--solvers", help="comma-separated subset of the table's solver names")
     parser.add_argument("--smoke", action="store_true", help="tiny sizes: check that it runs")
     args = parser.parse_args(argv)
     params = load_params().simulate.mpc
@@ -135,10 +138,13 @@ def main(argv: list[str] | None = None) -> int:
     solves = args.solves if args.solves is not None else 3 if args.smoke else 40
     print(f"centroidal MPC: {knot_count(params)} knots of {params.dt * 1e3:.0f} ms, {solves} "
           f"warm-started solves along a 4-step walk, period {params.dt * 1e3:.0f} ms")  # fmt: skip
-    print(f"{'solver':<20} {'build s':>8} {'median ms':>10} {'p95 ms':>8} {'real time':>10} "
-          f"{'vs ipopt m':>11}  failure")  # fmt: skip
+    print(f"{'solver':<20} {'build s':>8} {'median ms':>10} {'p95 ms':>8} {'cpu med':>8} "
+          f"{'cpu p95':>8} {'real time':>10} {'vs ipopt m':>11}  failure")  # fmt: skip
     reference = None
+    chosen = args.solvers.split(",") if args.solvers else None
     for name, (plugin, options) in solver_options().items():
+        if chosen is not None and name not in chosen:
+            continue
         start = time.perf_counter()
         try:
             with _quiet():
@@ -147,11 +153,12 @@ def main(argv: list[str] | None = None) -> int:
             text = str(error)
             why = ("structure detection failed: the problem is not declared stage by stage"
                    if "structure" in text.lower() else text.splitlines()[-1][:80])  # fmt: skip
-            print(f"{name:<20} {'-':>8} {'-':>10} {'-':>8} {'-':>10} {'-':>11}  build: {why}")
+            print(f"{name:<20} {'-':>8} {'-':>10} {'-':>8} {'-':>8} {'-':>8} {'-':>10} {'-':>11}  "
+                  f"build: {why}")  # fmt: skip
             continue
         build = time.perf_counter() - start
         with _quiet():
-            times, solutions, failure = _walk(mpc, solves, params, args.budget)
+            times, cpu, solutions, failure = _walk(mpc, solves, params, args.budget)
         if name == "ipopt":
             reference = solutions
         gap = "-"
@@ -160,11 +167,13 @@ def main(argv: list[str] | None = None) -> int:
             gap = f"{max(np.abs(a.com - b.com).max() for a, b in zip(reference[:shared], solutions[:shared], strict=True)):.1e}"  # noqa: E501
         if times:
             median, p95 = np.median(times) * 1e3, np.quantile(times, 0.95) * 1e3
+            cpu_median, cpu_p95 = np.median(cpu) * 1e3, np.quantile(cpu, 0.95) * 1e3
             fits = "yes" if p95 <= params.dt * 1e3 else "no"
-            print(f"{name:<20} {build:>8.2f} {median:>10.1f} {p95:>8.1f} {fits:>10} {gap:>11}  "
-                  f"{failure or '-'}"[:140])  # fmt: skip
+            print(f"{name:<20} {build:>8.2f} {median:>10.1f} {p95:>8.1f} {cpu_median:>8.1f} "
+                  f"{cpu_p95:>8.1f} {fits:>10} {gap:>11}  {failure or '-'}"[:160])  # fmt: skip
         else:
-            print(f"{name:<20} {build:>8.2f} {'-':>10} {'-':>8} {'-':>10} {'-':>11}  {failure}")
+            print(f"{name:<20} {build:>8.2f} {'-':>10} {'-':>8} {'-':>8} {'-':>8} {'-':>10} "
+                  f"{'-':>11}  {failure}")  # fmt: skip
     if not args.smoke:
         rtf, median, fallen = _closed_loop_rtf(2)
         print(f"closed loop (MuJoCo, online controller, 2 steps): real-time factor {rtf:.2f}x, "

@@ -74,6 +74,7 @@ class MpcSolution:
     feet: np.ndarray  # (2, N+1, 3)
     forces: np.ndarray  # (2, 4, N, 3) corner forces per unit mass, world frame
     solve_s: float  # wall time of the solve
+    solve_cpu_s: float = 0.0  # this process's CPU time in it (a loaded machine's wall time lies)
 
     def zmp(self, problem: MpcProblem, params: MpcParams, knot: int = 0) -> np.ndarray:
         """Where the net contact force of interval `knot`, drawn through the CoM, meets the floor.
@@ -248,7 +249,7 @@ class CentroidalMPC:
             problem.com_reference.T, problem.angular_momentum_reference.T,
             problem.external_force,
         ]  # fmt: skip
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         out = None
         while out is None:
             warm = self.previous is not None
@@ -262,7 +263,7 @@ class CentroidalMPC:
                     log.debug("centroidal MPC: %s from the warm start; retried cold", status)
                     continue
                 raise PimannError(None, f"centroidal MPC not solved ({self.solver}: {status})")
-        elapsed = time.perf_counter() - start
+        elapsed, cpu = time.perf_counter() - start, time.process_time() - cpu
         values = [np.asarray(v) for v in out]
         if not all(np.all(np.isfinite(v)) for v in values):
             self.previous = None
@@ -270,7 +271,8 @@ class CentroidalMPC:
         self.previous = values
         c, dc, angular, left, right, _, _, *flat, _ = values
         forces = np.array([[flat[4 * s + j].T for j in range(4)] for s in (0, 1)])
-        return MpcSolution(c.T, dc.T, angular.T, np.array([left.T, right.T]), forces, elapsed)
+        feet = np.array([left.T, right.T])
+        return MpcSolution(c.T, dc.T, angular.T, feet, forces, elapsed, cpu)
 
 
 def horizon_problem(
