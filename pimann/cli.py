@@ -114,7 +114,7 @@ def cmd_simulate(args: argparse.Namespace) -> None:
         check_video_path(args.video)  # before minutes of simulation, not after
     trajectory = _read_trajectory(args)
     with about(args.file):  # name the file, not the trajectory's `source`
-        result = simulate_trajectory(trajectory, params, args.duration)
+        result = simulate_trajectory(trajectory, params, args.duration, args.controller)
     summary = write_simulation(
         args.output, result, params, source=str(args.file), rate_hz=params.output_rate_hz
     )
@@ -234,12 +234,18 @@ def _parser() -> argparse.ArgumentParser:
     generate.add_argument("-o", "--output", type=Path, required=True, help="trajectory .h5")
     generate.add_argument("--no-steering", action="store_true", help="no control-informed steering")
 
-    simulate = add("simulate", cmd_simulate, "walk a trajectory in MuJoCo (offline controller)")
+    simulate = add("simulate", cmd_simulate, "walk a trajectory in MuJoCo (either controller)")
     simulate.add_argument("file", type=Path, help=trajectory)
     simulate.add_argument("-o", "--output", type=Path, required=True, help="result .h5")
     simulate.add_argument("--group", help="clip group inside a collection file")
     simulate.add_argument("--video", type=Path, help=".mp4, .gif or .png strip of the walk")
     simulate.add_argument("--duration", type=float, help="simulate at most this many seconds")
+    simulate.add_argument(
+        "--controller",
+        choices=("offline", "online"),
+        default="offline",
+        help="offline DCM plan (default) or the online centroidal MPC",
+    )
 
     check = add("check-data", cmd_check_data, "the shared data against the data manifest")
     check.add_argument(

@@ -262,28 +262,40 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     if not runs:
         log.info("joint_tracking: no simulation traces under %s, skipped", results.root / "sim")
         return None
-    # the paper's run: the featured PI model's steered mixed scenario, else any mixed run
+    # the paper's run: the featured PI model's steered mixed scenario, else any mixed run,
+    # under the offline controller; its online twin (`<name>-online`) beside it if there is one
+    offline = [(p, d) for p, d in runs if not p.stem.endswith("-online")] or runs
     featured = f"w{figures.pi_weight:g}-"
-    mixed = [(p, d) for p, d in runs if "mixed" in p.stem]
+    mixed = [(p, d) for p, d in offline if "mixed" in p.stem]
     path, data = next(
         (
             (p, d)
             for p, d in mixed
             if p.stem.startswith(featured) and p.stem.endswith("mixed-steering")
         ),
-        (mixed or runs)[0],
+        (mixed or offline)[0],
     )
+    shown = [("offline", path, data)]
+    shown += [("online", p, d) for p, d in runs if p.stem == f"{path.stem}-online"]
     names = list(data["names"])
     joints = [j for j in TRACKED_JOINTS if j in names] or names[:4]
-    fig, axes = new_figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)
-    for ax, joint in zip(axes.flat, joints, strict=False):
-        k = names.index(joint)
+    if len(shown) == 1:
+        fig, axes = new_figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)
+        panels = [(ax, joint, shown[0]) for ax, joint in zip(axes.flat, joints, strict=False)]
+    else:  # a row per joint, a column per controller
+        fig, axes = new_figure(figures, 1.3 * len(joints) + 0.6, len(joints), 2, sharex=True,
+                               squeeze=False)  # fmt: skip
+        panels = [(axes[r, c], joint, shown[c]) for r, joint in enumerate(joints) for c in (0, 1)]
+    for ax, joint, (controller, _, run) in panels:
+        k = list(run["names"]).index(joint)
         for kind, colour, line, width, z in JOINT_TRACES:
-            if f"joints_{kind}" in data:
-                ax.plot(data["time"], np.degrees(data[f"joints_{kind}"][:, k]), color=colour,
+            if f"joints_{kind}" in run:
+                ax.plot(run["time"], np.degrees(run[f"joints_{kind}"][:, k]), color=colour,
                         ls=line, label=kind, lw=width, zorder=z,
                         alpha=0.6 if kind == "measured" else 1.0)  # fmt: skip
-        ax.set_title(joint.replace("_", " "), fontsize="small", pad=2)
+        title = joint.replace("_", " ")
+        ax.set_title(title if len(shown) == 1 else f"{title}, {controller}", fontsize="small",
+                     pad=2)  # fmt: skip
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     for ax in axes[:, 0]:
@@ -292,7 +304,8 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     order = [labels.index(k) for k in ("generated", "reference", "measured") if k in labels]
     fig.legend([handles[i] for i in order], [labels[i] for i in order],
                loc="outside lower center", ncols=3)  # below: the title is above  # fmt: skip
-    fig.suptitle(f"MuJoCo, offline controller ({path.stem})", fontsize="small")
+    which = " and online controllers" if len(shown) > 1 else " controller"
+    fig.suptitle(f"MuJoCo, offline{which} ({path.stem})", fontsize="small")
     return fig
 
 

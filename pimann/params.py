@@ -232,6 +232,57 @@ class SimulateRun:
     scenario: str
     steering: bool
     video: bool  # also render this run to results/sim/<name>.mp4
+    controller: Literal["offline", "online"] = "offline"  # DCM plan + QP, or the centroidal MPC
+
+
+@dataclasses.dataclass(frozen=True)
+class MpcParams:
+    """simulate.mpc: the online centroidal MPC with step adjustment (SPEC 9; the authors' values).
+
+    Mass-normalised: forces per unit mass, angular momentum per unit mass.
+    """
+
+    horizon_s: float = 1.2  # s, 20 knots
+    dt: float = 0.06  # s, the MPC's period and knot spacing (0.05 on the robot)
+    friction: float = 0.1  # linearised cone's coefficient (0.33 on the robot)
+    corner_x: float = 0.1167  # m, the 4 force corners of a foot at (+-x, +-y) in its frame
+    corner_y: float = 0.0485
+    com_z_min: float = 0.68  # m, CoM height bounds
+    com_z_max: float = 0.72
+    box_x: list[float] = dataclasses.field(default_factory=lambda: [-0.01, 0.01])  # m, landing
+    box_y: list[float] = dataclasses.field(default_factory=lambda: [-0.01, 0.05])  # box, left foot
+    freeze_s: float = 0.2  # s: a footstep is frozen this long before its touchdown
+    angular_momentum_weight: float = 1.0
+    com_weight: list[float] = dataclasses.field(default_factory=lambda: [2.0, 2.0, 110.0])
+    footstep_weight: float = 20.0
+    force_mean_weight: float = 10.0  # each corner force toward its foot's mean corner force
+    force_rate_weight: list[float] = dataclasses.field(default_factory=lambda: [10.0, 10.0, 10.0])
+    force_vertical_weight: float = 100.0  # vertical forces toward the weight shared by the feet
+    swing_velocity_weight: float = 1.0e-3  # makes the airborne feet's velocities unique
+    max_iterations: int = 200  # ipopt iterations per solve
+
+
+@dataclasses.dataclass(frozen=True)
+class PushRollout:
+    """A rollout the push-recovery study walks: results/rollouts/<model>/<seed>/<scenario>-..."""
+
+    model: str
+    seed: int
+    scenario: str
+    steering: bool
+
+
+@dataclasses.dataclass(frozen=True)
+class PushParams:
+    """simulate.pushes: push recovery, the largest push survived bisected per controller."""
+
+    rollouts: list[PushRollout]  # empty: no push study
+    controllers: list[Literal["offline", "online"]]
+    directions: list[Literal["lateral", "forward"]]
+    duration_s: float = 0.1  # s, the push's length, centred on mid single support
+    max_force: float = 300.0  # N, the bisection's upper end
+    tolerance: float = 20.0  # N, the bisection stops when the bracket is this narrow
+    recovery_s: float = 1.5  # s after the push the base must stay up
 
 
 @dataclasses.dataclass(frozen=True)
@@ -272,6 +323,8 @@ class SimulateParams:
     video_every_n: int  # video: every n-th trace sample, played in real time
     video_width: int
     video_height: int
+    mpc: MpcParams  # the online controller
+    pushes: PushParams  # push recovery (results/sim/pushes.png, the summary's `pushes`)
     runs: list[SimulateRun]  # the simulate stage's runs
 
 
@@ -317,10 +370,14 @@ def _build(kind: Any, value: Any, key: str, source: Path) -> Any:
         unknown = sorted(set(value) - set(names))
         if unknown:
             raise PimannError(source, f"unknown key {_join(key, unknown[0])!r}")
-        missing = [n for n in names if n not in value]
+        optional = {f.name for f in dataclasses.fields(kind)
+                    if f.default is not dataclasses.MISSING
+                    or f.default_factory is not dataclasses.MISSING}  # fmt: skip
+        missing = [n for n in names if n not in value and n not in optional]
         if missing:
             raise PimannError(source, f"missing key {_join(key, missing[0])!r}")
-        return kind(**{n: _build(hints[n], value[n], _join(key, n), source) for n in names})
+        present = [n for n in names if n in value]
+        return kind(**{n: _build(hints[n], value[n], _join(key, n), source) for n in present})
     if origin in (types.UnionType, typing.Union):
         options = typing.get_args(kind)
         if value is None and type(None) in options:

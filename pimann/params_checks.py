@@ -126,6 +126,20 @@ RANGES: dict[str, Bound] = {
     "simulate.video_width": Bound(16.0),
     "simulate.video_height": Bound(16.0),
     "simulate.runs.*.seed": NON_NEGATIVE,
+    "simulate.mpc.horizon_s": POSITIVE,
+    "simulate.mpc.dt": POSITIVE,
+    "simulate.mpc.friction": POSITIVE,
+    "simulate.mpc.corner_*": POSITIVE,
+    "simulate.mpc.com_z_*": POSITIVE,
+    "simulate.mpc.freeze_s": NON_NEGATIVE,
+    "simulate.mpc.*_weight": NON_NEGATIVE,
+    "simulate.mpc.*_weight.*": NON_NEGATIVE,
+    "simulate.mpc.max_iterations": AT_LEAST_ONE,
+    "simulate.pushes.duration_s": POSITIVE,
+    "simulate.pushes.max_force": POSITIVE,
+    "simulate.pushes.tolerance": POSITIVE,
+    "simulate.pushes.recovery_s": POSITIVE,
+    "simulate.pushes.rollouts.*.seed": NON_NEGATIVE,
     "figures.drift_reduction": Bound(0.0, 1.0, closed_low=False),
     "figures.width_in": POSITIVE,
     "figures.font_pt": POSITIVE,
@@ -203,6 +217,27 @@ def check_references(params: Any, source: Path) -> None:
         for k, weight in enumerate(getattr(params.figures, key)):
             if weight not in weights:
                 raise _unknown(source, f"figures.{key}[{k}]", weight, weights)
+    mpc = params.simulate.mpc
+    if mpc.com_z_min > mpc.com_z_max:
+        raise PimannError(source, "simulate.mpc.com_z_min must not exceed simulate.mpc.com_z_max")
+    for key in ("box_x", "box_y"):
+        box = getattr(mpc, key)
+        if len(box) != 2 or box[0] > 0.0 or box[1] < 0.0:
+            problem = f"simulate.mpc.{key} must be [low <= 0, high >= 0], not {box}"
+            raise PimannError(source, problem)
+    for key in ("com_weight", "force_rate_weight"):
+        if len(getattr(mpc, key)) != 3:
+            raise PimannError(source, f"simulate.mpc.{key} must have 3 entries (x, y, z)")
+    if mpc.horizon_s < 2 * mpc.dt:
+        raise PimannError(source, "simulate.mpc.horizon_s must span at least 2 knots of dt")
+    for k, run in enumerate(params.simulate.pushes.rollouts):
+        key = f"simulate.pushes.rollouts[{k}]"
+        if run.model not in model_names(params):
+            raise _unknown(source, f"{key}.model", run.model, model_names(params))
+        if run.seed not in params.train.seeds:
+            raise _unknown(source, f"{key}.seed", run.seed, params.train.seeds)
+        if run.scenario not in rolled_out:
+            raise _unknown(source, f"{key}.scenario", run.scenario, rolled_out)
     for k, run in enumerate(params.simulate.runs):
         key = f"simulate.runs[{k}]"
         if run.model not in model_names(params):

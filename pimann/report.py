@@ -36,7 +36,7 @@ REPORT_FILE = "report.html"
 MEDIA_TYPES = {".png": "image/png", ".gif": "image/gif", ".mp4": "video/mp4"}
 VIDEO_SUFFIXES = (".mp4", ".gif")
 SIM_COLUMNS = (  # sim_summary.json run fields shown in the simulation table
-    "model", "seed", "scenario", "steering", "success", "fallen", "fall_time_s",
+    "model", "seed", "scenario", "steering", "controller", "success", "fallen", "fall_time_s",
     "simulated_s", "distance_walked_m", "steps", "foot_slip_m", "joint_rmse_rad",
     "zmp_error_rms_m",
 )  # fmt: skip
@@ -155,10 +155,19 @@ def _simulation(results: Path) -> str:
     summary_path = results / "sim_summary.json"
     if not summary_path.is_file():
         return _missing("sim_summary.json", "simulate")
-    runs = json.loads(summary_path.read_text()).get("runs", {})
+    summary = json.loads(summary_path.read_text())
+    runs = summary.get("runs", {})
     rows = [[name, *(run.get(c) for c in SIM_COLUMNS[1:])] for name, run in runs.items()]
     videos = sorted(p for p in (results / "sim").glob("*") if p.suffix.lower() in VIDEO_SUFFIXES)
     table = _table(["run", *SIM_COLUMNS[1:]], rows)
+    pushes = [  # per rollout, controller and direction: the largest push survived (N)
+        [name, controller, direction, force]
+        for name, study in (summary.get("pushes") or {}).items() if "failed" not in study
+        for controller, row in study.items() for direction, force in row.items()
+    ]  # fmt: skip
+    if pushes:
+        table += "<p>Push recovery: the largest 0.1 s push on the base survived (N).</p>"
+        table += _table(["rollout", "controller", "direction", "largest push (N)"], pushes)
     if not videos:
         return table + "<p>No videos (simulate.runs marks the runs that get one).</p>"
     return table + _figures(videos)

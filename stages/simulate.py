@@ -1,11 +1,12 @@
-"""DVC stage `simulate`: chosen rollouts walked by ergoCub in MuJoCo (offline controller).
+"""DVC stage `simulate`: chosen rollouts walked by ergoCub in MuJoCo (both controllers).
 
     python stages/simulate.py [--rollouts results/rollouts] [--out results/sim]
                               [--summary results/sim_summary.json]
 
-runs every rollout of `simulate.runs` (params.yaml) through footsteps -> DCM plan ->
-whole-body IK + ZMP-CoM feedback -> MuJoCo and writes results/sim/<run>.h5, a video of the
-runs marked `video`, and the per-run summary (layout: pimann.sim.runs).
+runs every rollout of `simulate.runs` (params.yaml) through footsteps -> DCM plan (offline)
+or the centroidal MPC replanned as it walks (online) -> whole-body IK + ZMP-CoM feedback ->
+MuJoCo and writes results/sim/<run>.h5, a video of the runs marked `video`, the push-recovery
+study of `simulate.pushes`, and the per-run summary (layout: pimann.sim.runs).
 """
 
 from __future__ import annotations

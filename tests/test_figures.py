@@ -170,3 +170,27 @@ def test_foot_rotation_labels_do_not_collide(params, tmp_path):
     fig = FIGURES["foot_rotations"](results, params.figures)
     assert [ax.get_ylabel() for ax in fig.axes] == ["", ""]
     assert [ax.get_title() for ax in fig.axes] == ["left foot", "right foot"]
+
+
+def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_path):
+    import shutil
+
+    root = crafted_results(tmp_path / "results", params)
+    sim = root / "sim"
+    shutil.copy(sim / "mixed.h5", sim / "w10-0-mixed-steering.h5")
+    with (
+        h5py.File(sim / "mixed.h5", "r") as source,
+        h5py.File(sim / "w10-0-mixed-steering-online.h5", "w") as file,
+    ):
+        for key in ("time", "joints_reference", "joints_generated"):
+            file[key] = source[key][()]
+        file["joints_measured"] = source["joints_reference"][()] + 0.05  # tracks worse
+        file.attrs["joint_names"] = list(JOINT_NAMES)
+    fig = FIGURES["joint_tracking"](load_results(root), params.figures)
+    titles = [ax.get_title() for ax in fig.axes]
+    assert len(titles) == 8 and titles[0].endswith(", offline") and titles[1].endswith(", online")
+    assert "offline and online" in fig._suptitle.get_text()
+    measured = [line for line in fig.axes[1].get_lines() if line.get_label() == "measured"][0]
+    reference = [line for line in fig.axes[1].get_lines() if line.get_label() == "reference"][0]
+    gap = np.abs(measured.get_ydata() - reference.get_ydata()).max()
+    assert gap == pytest.approx(np.degrees(0.05), rel=1e-6)  # the online run's own traces

@@ -88,6 +88,14 @@ def _set(raw: dict, dotted: str, value) -> None:
         ("figures.box_weights.1", 3, r"figures.box_weights\[1\]: unknown 3.0"),
         ("evaluate.contact_off_height", 0.01, r"contact_off_height must be >= evaluate.contact_on"),
         ("train.seeds", [0, 0], r"train.seeds must be a non-empty list without repeats"),
+        ("simulate.mpc.friction", 0.0, r"simulate.mpc.friction must be > 0, not 0.0"),
+        ("simulate.mpc.box_y", [0.01, 0.05], r"simulate.mpc.box_y must be \[low <= 0, high >= 0\]"),
+        ("simulate.mpc.com_z_min", 0.8, r"com_z_min must not exceed simulate.mpc.com_z_max"),
+        ("simulate.mpc.com_weight", [2.0, 2.0], r"simulate.mpc.com_weight must have 3 entries"),
+        ("simulate.mpc.com_weight.2", -1.0, r"simulate.mpc.com_weight.2 must be >= 0, not -1.0"),
+        ("simulate.runs.0.controller", "mpc", r"simulate.runs\[0\].controller must be one of"),
+        ("simulate.pushes.rollouts.0.model", "w7", r"simulate.pushes.rollouts\[0\].model: unknown"),
+        ("simulate.pushes.tolerance", 0.0, r"simulate.pushes.tolerance must be > 0"),
     ],
 )
 def test_bad_values_are_named_with_what_is_allowed(tmp_path, raw, dotted, value, message):
@@ -125,3 +133,11 @@ def test_unknown_profile(tmp_path, raw):
     raw["profile"] = "huge"
     with pytest.raises(PimannError, match="profile 'huge'"):
         load_params(_write(tmp_path, raw))
+
+
+def test_a_run_without_a_controller_is_offline(tmp_path, raw):
+    raw["profile"] = "paper"
+    raw["simulate"]["runs"][0].pop("controller", None)
+    params = load_params(_write(tmp_path, raw))
+    assert params.simulate.runs[0].controller == "offline"
+    assert {run.controller for run in params.simulate.runs} == {"offline", "online"}

@@ -146,3 +146,21 @@ def test_every_image_and_video_loads_in_a_browser(study, params, tmp_path):
     loaded = json.loads(match.group(1))
     assert loaded["images"] == [True] * 4
     assert len(loaded["videos"]) == 1 and min(loaded["videos"]) >= 1  # HAVE_METADATA
+
+
+def test_push_recovery_table(study, params, tmp_path):
+    """The summary's push studies become a table; a failed study is left out of it."""
+    import shutil
+
+    results, figures = study
+    copy = tmp_path / "results"
+    shutil.copytree(results, copy)
+    summary = json.loads((copy / "sim_summary.json").read_text())
+    summary["pushes"] = {
+        "w10-0-forward-steering": {"offline": {"lateral": 312.5}, "online": {"lateral": 187.5}},
+        "w0-0-forward-steering": {"failed": "rollout unreadable"},
+    }
+    (copy / "sim_summary.json").write_text(json.dumps(summary))
+    page = build_report(copy, figures, params, {})
+    assert "largest push (N)" in page and "312.5" in page and "187.5" in page
+    assert "w0-0-forward-steering" not in page

@@ -1,11 +1,13 @@
-"""Trajectory control in MuJoCo (paper Sec. II-C, offline controller; SPEC 9).
+"""Trajectory control in MuJoCo (paper Sec. II-C, both controllers; SPEC 9).
 
 model: the MuJoCo ergoCub from the `_minContacts` URDF, foot forces and measured ZMP.
 footsteps: footsteps and timing from a generated trajectory's contacts (0.33x speed, 0.4x steps).
 dcm: offline DCM/ZMP adjustment over the whole horizon (casadi).
 com_reference: the generated CoM mapped onto the footstep plan, which the DCM plan stays near.
+centroidal_mpc: the online controller's centroidal MPC with step adjustment (casadi).
+online: the MPC replanned in the closed loop: CoM, ZMP and adjusted footsteps for the IK.
 wbc: whole-body QP IK (pink + daqp) and the ZMP-CoM feedback law.
-run: the closed loop, `simulate_trajectory(trajectory, params) -> SimulationResult`.
+run: the closed loop, `simulate_trajectory(trajectory, params, controller=...)`.
 synthetic: a kinematic stepping trajectory for tests and benchmarks.
 results: a run written to (and read from) HDF5, the ZMP-outside-the-support figure.
 video: offscreen MuJoCo rendering of a run (stick-figure fallback without OpenGL).

@@ -21,12 +21,14 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
+from pimann.errors import PimannError
 from pimann.params import SimulateParams
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot, load_robot
 from pimann.sim.com_reference import com_reference
 from pimann.sim.dcm import DCMPlan, knot_times, plan_dcm
 from pimann.sim.footsteps import FootstepPlan, extract_footsteps
 from pimann.sim.model import SimModel, build_sim_model
+from pimann.sim.online import OnlineReference, Push, centroidal_state
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback
 from pimann.trajectory import Trajectory
@@ -66,6 +68,8 @@ class SimulationResult:
     foot_forces: np.ndarray  # (K, 2) floor's normal force on the left / right foot, N
     com_world: np.ndarray  # (K, 3) simulated CoM in the simulation's world (no drift removed)
     foot_slip_per_foot: np.ndarray  # (2,) m, foot_slip of the left / right foot
+    controller: str = "offline"  # offline (DCM plan) or online (centroidal MPC)
+    mpc_solve_s: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  # per solve
 
     @property
     def soles_final(self) -> np.ndarray:
@@ -97,7 +101,14 @@ class SimulationResult:
                 np.linalg.norm(self.soles_final[:, :2] - self.soles_planned[:, :2], axis=1).max()
             ),
             "real_time_factor": self.real_time_factor,
+            "controller": self.controller,
+            "mpc_solve_median_s": _quantile(self.mpc_solve_s, 0.5),
+            "mpc_solve_p95_s": _quantile(self.mpc_solve_s, 0.95),
         }
+
+
+def _quantile(values: np.ndarray, q: float) -> float | None:
+    return float(np.quantile(values, q)) if len(values) else None
 
 
 def _posture_from_trajectory(
@@ -130,10 +141,20 @@ def simulate_plan(
     duration: float | None = None,
     robot: Robot | None = None,
     sim: SimModel | None = None,
+    online: OnlineReference | None = None,
+    push: Push | None = None,
 ) -> SimulationResult:
-    """Run the controller on a footstep and DCM plan from the standing configuration q0."""
+    """Run the controller on a footstep and DCM plan from the standing configuration q0.
+
+    Offline: the CoM and ZMP references are the DCM plan's. Online: `online` replans them
+    (and the footsteps of its own copy of the plan) from the measured state every MPC period.
+    `push` is an external force on the base.
+    """
     robot = robot or load_robot("simulation")
     sim = sim or build_sim_model(params)
+    reference: DCMPlan | OnlineReference = dcm if online is None else online
+    plan = plan if online is None else online.plan
+    base_body = int(sim.model.jnt_bodyid[0])  # the free joint's body
     posture = posture or (lambda t: STANDING_JOINTS)
     dt = 1.0 / params.control_rate_hz
     substeps = max(1, int(round(dt / params.timestep)))
@@ -155,7 +176,9 @@ def simulate_plan(
         com_measured = sim.com(data)
         com_measured[:2] -= drift.value
         zmp_measured = zmp_filter.value - drift.value
-        com_ref, velocity_ref, zmp_ref = dcm.at(t)
+        if online is not None and online.due(t):
+            online.update(t, com_measured, *centroidal_state(sim, data))
+        com_ref, velocity_ref, zmp_ref = reference.at(t)
         velocity = zmp_com_feedback(
             velocity_ref[:2],
             zmp_ref,
@@ -165,7 +188,7 @@ def simulate_plan(
             params.k_zmp,
             params.k_com,
         )
-        com_target = np.append(ik.com_position()[:2] + velocity * dt, dcm.at(t + dt)[0][2])
+        com_target = np.append(ik.com_position()[:2] + velocity * dt, reference.at(t + dt)[0][2])
         left, right = plan.sole_placement(0, t + dt), plan.sole_placement(1, t + dt)
         yaws = [np.arctan2(p.rotation[1, 0], p.rotation[0, 0]) for p in (left, right)]
         generated = np.asarray(posture(t), dtype=float)
@@ -181,6 +204,8 @@ def simulate_plan(
             np.linalg.norm(ik.com_position() - com_target),
         )
         data.ctrl[:] = joints
+        if push is not None:
+            data.xfrc_applied[base_body, :3] = push.at(t)
         for _ in range(substeps):
             mujoco.mj_step(sim.model, data)
             zmp_filter(sim.zmp(data)[0])
@@ -197,7 +222,7 @@ def simulate_plan(
                 continue
             anchor = anchors.setdefault((side, k), soles[side, :2].copy())
             slip[side] = max(slip[side], float(np.linalg.norm(soles[side, :2] - anchor)))
-        com_after, _, zmp_ref_after = dcm.at(t + dt)
+        com_after, _, zmp_ref_after = reference.at(t + dt)
         values = (
             t + dt, joints, sim.joints(data), generated, com_after,
             sim.com(data) - np.append(drift.value, 0.0), zmp_ref_after,
@@ -237,13 +262,23 @@ def simulate_plan(
         foot_forces=arrays["forces"],
         com_world=arrays["com_world"],
         foot_slip_per_foot=slip,
+        controller="offline" if online is None else "online",
+        mpc_solve_s=np.zeros(0) if online is None else np.array(online.solve_times),
     )
 
 
 def simulate_trajectory(
-    trajectory: Trajectory, params: SimulateParams, duration: float | None = None
+    trajectory: Trajectory,
+    params: SimulateParams,
+    duration: float | None = None,
+    controller: str = "offline",
+    push: Push | None = None,
 ) -> SimulationResult:
-    """Track a generated trajectory in MuJoCo with the offline controller (paper Sec. II-C)."""
+    """Track a generated trajectory in MuJoCo with either of the paper's controllers (II-C).
+
+    offline: the DCM plan over the whole walk; online: the centroidal MPC, which takes the
+    same plan's CoM as its reference and replans the CoM and the footsteps as it walks.
+    """
     robot = load_robot("simulation")
     q0 = standing_pose(robot, params)
     plan = extract_footsteps(robot, trajectory, params, standing_feet(robot, q0))
@@ -251,6 +286,10 @@ def simulate_trajectory(
     if params.plan_com_weight > 0:  # the generated CoM, kept close by the DCM plan
         reference = com_reference(robot, trajectory, plan, params, knot_times(plan, params))
     dcm = plan_dcm(plan, params, pin.centerOfMass(robot.model, robot.data, q0), reference)
+    if controller not in ("offline", "online"):
+        raise PimannError(trajectory.source, f"unknown controller {controller!r}")
+    online = OnlineReference(plan, dcm, params) if controller == "online" else None
     return simulate_plan(
-        plan, dcm, params, q0, _posture_from_trajectory(trajectory, plan), duration, robot
-    )
+        plan, dcm, params, q0, _posture_from_trajectory(trajectory, plan), duration, robot,
+        online=online, push=push,
+    )  # fmt: skip

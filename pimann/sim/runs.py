@@ -1,8 +1,10 @@
 """The simulate stage's work: chosen rollouts walked in MuJoCo, one result file each, a summary.
 
-results/sim/<model>-<seed>-<scenario>-<steering|nosteering>.h5   (pimann.sim.results)
+results/sim/<model>-<seed>-<scenario>-<steering|nosteering>[-online].h5   (pimann.sim.results)
 results/sim/<same name>.mp4                                       (runs marked `video`)
-summary JSON: per run the summary figures, plus the profile and the params used
+results/sim/pushes.png                                            (simulate.pushes, if any)
+summary JSON: per run the summary figures, per push study the largest push survived per
+controller and direction (N), plus the profile and the params used
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pimann.params import Params, SimulateRun, as_dict
 from pimann.paths import repo_relative
 from pimann.progress import track
 from pimann.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.sim.pushes import plot_push_recovery, push_records, push_recovery
 from pimann.sim.results import write_simulation
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.video import render_simulation
@@ -28,7 +31,9 @@ log = logging.getLogger(__name__)
 
 
 def run_name(run: SimulateRun) -> str:
-    return f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+    """The offline controller's runs keep their names; the online one's gain `-online`."""
+    name = f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+    return name if run.controller == "offline" else f"{name}-{run.controller}"
 
 
 def _json_ready(value: Any) -> Any:
@@ -61,18 +66,28 @@ def simulate_runs(
         if not path.is_file():
             raise PimannError(path, "rollout not found (run the rollout stage first)")
         jobs.append((run, path))
+    push_jobs = []
+    for rollout in sim.pushes.rollouts:
+        key = RolloutKey(rollout.model, rollout.seed, rollout.scenario, rollout.steering)
+        path = rollout_path(rollouts_dir, key)
+        if not path.is_file():
+            raise PimannError(path, "rollout not found (run the rollout stage first)")
+        push_jobs.append((f"{key.model}-{key.seed}-{key.scenario}-"
+                          f"{STEERING_LABEL[key.steering]}", path))  # fmt: skip
     runs: dict[str, Any] = {}
+    pushes: dict[str, Any] = {}
     with atomic_path(out_dir) as tmp:
         tmp.mkdir()
         for run, path in track(jobs, "simulate", "runs", logger=log):
             name = run_name(run)
             provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
-                          "steering": run.steering, "rollout": repo_relative(path)}  # fmt: skip
+                          "steering": run.steering, "controller": run.controller,
+                          "rollout": repo_relative(path)}  # fmt: skip
             try:
                 with about(path, f"simulate run {name}"):
                     trajectory = read_trajectory(path)
                     log.debug("%s: %.1f s generated", name, trajectory.time[-1])
-                    result = simulate_trajectory(trajectory, sim)
+                    result = simulate_trajectory(trajectory, sim, controller=run.controller)
             except PimannError as error:  # recorded, the other runs go on
                 log.warning("%s", error)
                 runs[name] = {**provenance, "success": False, "failed": str(error)}
@@ -95,6 +110,20 @@ def simulate_runs(
                     height=sim.video_height,
                 )  # fmt: skip
             runs[name] = {**provenance, **summary}
+        for name, path in track(push_jobs, "simulate", "push studies", logger=log):
+            try:
+                with about(path, f"push recovery {name}"):
+                    pushes[name] = push_recovery(read_trajectory(path), sim,
+                                                 list(sim.pushes.controllers))  # fmt: skip
+            except PimannError as error:  # recorded, the other studies go on
+                log.warning("%s", error)
+                pushes[name] = {"failed": str(error)}
+        tables = {name: table for name, table in pushes.items() if "failed" not in table}
+        if tables:
+            plot_push_recovery(next(iter(tables.values())), tmp / "pushes.png")
+            for row in push_records(tables):
+                log.info("push recovery %s, %s, %s: %.0f N", row["rollout"], row["controller"],
+                         row["direction"], row["largest_survived_n"])  # fmt: skip
     failed = sorted(name for name, run in runs.items() if "failed" in run)
     if failed:
         log.warning("%d of %d runs failed: %s", len(failed), len(runs), ", ".join(failed))
@@ -103,7 +132,7 @@ def simulate_runs(
     log.info("%d of %d runs succeeded; fell: %s", sum(bool(run.get("success")) for run in
              runs.values()), len(runs), ", ".join(fell) or "none")  # fmt: skip
     record = {"profile": params.profile, "failed_runs": failed, "runs": runs,
-              "params": {"simulate": as_dict(sim)}}  # fmt: skip
+              "pushes": pushes, "params": {"simulate": as_dict(sim)}}  # fmt: skip
     record = _json_ready(record)
     write_text_atomic(summary_path, json.dumps(record, indent=2) + "\n")
     return record

@@ -1,0 +1,314 @@
+"""The online centroidal MPC with real casadi/ipopt, and its closed loop in MuJoCo."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from pimann.errors import PimannError
+from pimann.params import MpcParams, SimulateRun, load_params
+from pimann.rotations import rot_z
+from pimann.sim.centroidal_mpc import (
+    GRAVITY,
+    CentroidalMPC,
+    MpcProblem,
+    MpcSolution,
+    corners,
+    horizon_problem,
+    knot_count,
+    landing_box,
+)
+from pimann.sim.synthetic import stepping_plan
+
+SOLE_Z = -0.002
+FEET = np.array([[0.0, 0.1, 0.0], [0.0, -0.1, 0.0]])
+COM = np.array([0.0, 0.0, 0.7])
+
+
+@pytest.fixture(scope="module")
+def mpc() -> CentroidalMPC:
+    return CentroidalMPC(MpcParams())
+
+
+def _problem(plan, t: float, params: MpcParams, velocity=(0.0, 0.0, 0.0), com=COM) -> MpcProblem:
+    nominal = tuple(f.positions.copy() for f in plan.feet)
+    reference = np.tile(COM, (knot_count(params) + 1, 1))
+    return horizon_problem(
+        plan, nominal, t, params, np.asarray(com, float), np.asarray(velocity, float),
+        np.zeros(3), reference, SOLE_Z,
+    )  # fmt: skip
+
+
+def _solve(mpc: CentroidalMPC, problem: MpcProblem) -> MpcSolution:
+    mpc.previous = None  # every test from the same cold start
+    return mpc.solve(problem)
+
+
+def test_standing_holds_the_com_with_forces_in_the_cone(mpc):
+    params = mpc.params
+    plan = stepping_plan(FEET, 0, 0.0)
+    problem = _problem(plan, 0.0, params)
+    assert problem.contact.all()  # both feet carry the robot on every interval
+    solution = _solve(mpc, problem)
+    assert np.abs(solution.com - COM).max() < 1e-3
+    assert np.abs(solution.com_velocity).max() < 1e-2
+    # the feet carry the weight, each corner inside the linearised cone, in its foot's frame
+    np.testing.assert_allclose(solution.forces[..., 2].sum(axis=(0, 1)), -GRAVITY[2], rtol=0.01)
+    bound = params.friction / np.sqrt(2.0)
+    for side in (0, 1):
+        for knot in range(knot_count(params)):
+            local = rot_z(problem.yaw[side, knot]).T @ solution.forces[side, :, knot].T  # (3, 4)
+            assert (local[2] >= -1e-6).all()
+            assert (np.abs(local[:2]) <= bound * local[2] + 1e-6).all()
+    np.testing.assert_allclose(
+        solution.feet[:, :, :2], np.repeat(FEET[:, None, :2], 21, 1), atol=1e-9
+    )
+
+
+def _forward_euler(problem: MpcProblem, solution: MpcSolution, params: MpcParams):
+    """The states the solution's forces give by forward Euler, integrated here from scratch."""
+    dt, local = params.dt, corners(params)
+    c, v, angular = problem.com.copy(), problem.com_velocity.copy(), problem.angular_momentum.copy()
+    states = [(c, v, angular)]
+    for k in range(knot_count(params)):
+        force, torque = np.zeros(3), np.zeros(3)
+        for side in (0, 1):
+            a = problem.contact[side, k]
+            for j in range(4):
+                f = solution.forces[side, j, k]
+                point = rot_z(problem.yaw[side, k]) @ local[j] + solution.feet[side, k]
+                force += a * f
+                torque += a * np.cross(point - c, f)
+        c, v, angular = (
+            c + v * dt,
+            v + (GRAVITY + force + problem.external_force) * dt,
+            (angular + torque * dt),
+        )
+        states.append((c, v, angular))
+    return [np.array(s) for s in zip(*states, strict=True)]
+
+
+def test_dynamics_match_forward_euler_while_stepping(mpc):
+    """A forward step from a moving CoM: the solution obeys the closed-form Euler recursion."""
+    params = mpc.params
+    plan = stepping_plan(FEET, 2, 0.2)
+    problem = _problem(plan, 0.3, params, velocity=(0.2, 0.05, 0.0))
+    assert (problem.contact.sum(axis=0) == 1).any()  # a single support inside the horizon
+    solution = _solve(mpc, problem)
+    com, velocity, angular = _forward_euler(problem, solution, params)
+    np.testing.assert_allclose(solution.com, com, atol=1e-6)
+    np.testing.assert_allclose(solution.com_velocity, velocity, atol=1e-6)
+    np.testing.assert_allclose(solution.angular_momentum, angular, atol=1e-6)
+    assert np.abs(angular).max() > 1e-4  # the check saw torques, not zeros
+
+
+def test_a_commanded_step_lands_inside_its_box(mpc):
+    """Pushed forward hard, the right foot's next landing moves to the box's front edge."""
+    params = mpc.params
+    plan = stepping_plan(FEET, 2, 0.2)  # the right foot steps first: off 0.5 s, on 1.2 s
+    problem = _problem(plan, 0.3, params, velocity=(0.5, 0.0, 0.0))
+    landing = np.flatnonzero(problem.landing[1])
+    assert len(landing) and not problem.landing[0].any()
+    solution = _solve(mpc, problem)
+    nominal = plan.feet[1].positions[1]
+    box = landing_box(params, 1)
+    offset = solution.feet[1, landing, :2] - nominal  # yaw 0: the foot frame is the world's
+    assert (offset[:, 0] >= box[0, 0] - 1e-6).all() and (offset[:, 0] <= box[0, 1] + 1e-6).all()
+    assert (offset[:, 1] >= box[1, 0] - 1e-6).all() and (offset[:, 1] <= box[1, 1] + 1e-6).all()
+    assert offset[:, 0].min() > box[0, 1] - 1e-3  # it wanted further: the box held it
+    np.testing.assert_allclose(solution.feet[1, landing, 2], SOLE_Z, atol=1e-9)
+
+
+@pytest.mark.parametrize("direction", [-1.0, 1.0])
+def test_a_sideways_push_moves_the_next_footstep_its_way(mpc, direction):
+    """A constant sideways force (1.5 m/s^2, beyond what mu = 0.1 can resist): the MPC steps."""
+    params = mpc.params
+    plan = stepping_plan(FEET, 2, 0.2)
+    calm = _solve(mpc, _problem(plan, 0.3, params))
+    problem = _problem(plan, 0.3, params)
+    problem.external_force = np.array([0.0, 1.5 * direction, 0.0])
+    pushed = _solve(mpc, problem)
+    landing = np.flatnonzero(problem.landing[1])[0]
+    moved = pushed.feet[1, landing, 1] - calm.feet[1, landing, 1]
+    assert direction * moved > 0.005
+
+
+def test_a_frozen_footstep_does_not_move(mpc):
+    """Less than freeze_s before touchdown the landing is fixed, whatever the push."""
+    params = mpc.params
+    plan = stepping_plan(FEET, 2, 0.2)
+    problem = _problem(plan, 1.1, params)  # right touchdown at 1.2 s: frozen
+    assert not problem.landing[1].any()
+    problem.external_force = np.array([0.0, -1.5, 0.0])
+    solution = _solve(mpc, problem)
+    on = np.flatnonzero(problem.contact[1])
+    np.testing.assert_allclose(solution.feet[1, on[-1], :2], plan.feet[1].positions[1], atol=1e-6)
+
+
+def test_an_unsolvable_horizon_is_an_error():
+    """CoM height bounds out of the forces' reach by knot 2 (5 m up): ipopt's status is named."""
+    params = dataclasses.replace(MpcParams(), com_z_min=5.0, com_z_max=5.1)
+    problem = _problem(stepping_plan(FEET, 0, 0.0), 0.0, params)
+    with pytest.raises(PimannError, match="centroidal MPC not solved \\(ipopt: Infeasible"):
+        CentroidalMPC(params).solve(problem)
+
+
+def test_online_walk_in_mujoco(sim_robot, sim_params):
+    """Two steps with the online controller: no fall, the feet land near the plan, MPC timed."""
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    feet = standing_feet(sim_robot, standing_pose(sim_robot, sim_params))
+    plan = stepping_plan(feet, steps=2, step=0.1, start=0.2, end=0.2)
+    result = simulate_trajectory(stepping_trajectory(sim_robot, fast, plan), fast, None, "online")
+    assert not result.fallen and result.controller == "online"
+    assert result.time[-1] == pytest.approx(result.planned_duration, abs=0.011)
+    assert result.foot_slip < 0.01 and result.base_height.min() > 0.7
+    np.testing.assert_allclose(result.soles_final[:, :2], result.soles_planned[:, :2], atol=0.015)
+    period = sim_params.mpc.dt
+    assert len(result.mpc_solve_s) == pytest.approx(result.time[-1] / period, abs=1.0)
+    summary = result.summary()
+    assert summary["controller"] == "online" and summary["mpc_solve_median_s"] > 0
+
+
+def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot, sim_params):
+    """An online run whose MPC cannot be solved is recorded; the offline run beside it walks."""
+    from pimann.rollout_layout import RolloutKey, rollout_path
+    from pimann.sim.runs import simulate_runs
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+    from pimann.trajectory import write_trajectory
+
+    q0 = standing_pose(sim_robot, sim_params)
+    plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
+    walk = stepping_trajectory(sim_robot, sim_params, plan, 25.0)
+    rollouts = tmp_path / "rollouts"
+    runs = [
+        SimulateRun("w10", 0, "forward", True, False, controller=c) for c in ("online", "offline")
+    ]
+    path = rollout_path(rollouts, RolloutKey("w10", 0, "forward", True))
+    path.parent.mkdir(parents=True)
+    write_trajectory(path, walk)
+    unsolvable = dataclasses.replace(sim_params.mpc, com_z_min=5.0, com_z_max=5.1)
+    no_pushes = dataclasses.replace(sim_params.pushes, rollouts=[])
+    short = dataclasses.replace(sim_params, runs=runs, mpc=unsolvable, zmp_hold_s=0.3,
+                                end_hold_s=0.2, pushes=no_pushes)  # fmt: skip
+    params = dataclasses.replace(load_params(), simulate=short)
+    record = simulate_runs(rollouts, tmp_path / "sim", tmp_path / "summary.json", params)
+    assert record["failed_runs"] == ["w10-0-forward-steering-online"]
+    failure = record["runs"]["w10-0-forward-steering-online"]
+    assert "simulate run w10-0-forward-steering-online" in failure["failed"]
+    assert "centroidal MPC not solved" in failure["failed"]
+    assert failure["controller"] == "online" and failure["success"] is False
+    walked = record["runs"]["w10-0-forward-steering"]
+    assert walked["controller"] == "offline" and "failed" not in walked
+    assert json.loads((tmp_path / "summary.json").read_text())["failed_runs"] == [
+        "w10-0-forward-steering-online"
+    ]
+    assert (tmp_path / "sim" / "w10-0-forward-steering.h5").is_file()
+
+
+def test_bisection_finds_the_threshold_from_below():
+    from pimann.sim.pushes import largest_survived
+
+    tried = []
+
+    def survives(force: float) -> bool:
+        tried.append(force)
+        return force <= 123.0
+
+    found = largest_survived(survives, 300.0, 5.0)
+    assert 118.0 <= found <= 123.0 and tried[0] == 300.0
+    assert largest_survived(lambda force: True, 300.0, 5.0) == 300.0
+    assert largest_survived(lambda force: False, 300.0, 5.0) < 5.0
+
+
+def test_pushes_point_where_they_should():
+    """Lateral: toward the swing foot's side; forward: along the stance heading; mid swing."""
+    from pimann.sim.pushes import push_at_mid_single_support
+
+    plan = stepping_plan(FEET, 2, 0.2)  # the right foot swings first, 0.5 s to 1.2 s
+    lateral = push_at_mid_single_support(plan, "lateral", 100.0, 0.1)
+    np.testing.assert_allclose(lateral.force, [0.0, -100.0, 0.0], atol=1e-9)
+    assert lateral.start == pytest.approx(0.85 - 0.05)
+    np.testing.assert_allclose(lateral.at(0.85), lateral.force)
+    np.testing.assert_allclose(lateral.at(0.95), 0.0)
+    forward = push_at_mid_single_support(plan, "forward", 50.0, 0.1)
+    np.testing.assert_allclose(forward.force, [50.0, 0.0, 0.0], atol=1e-9)
+
+
+def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
+    """The offline controller in MuJoCo: 0 N walks on, a 400 N lateral push knocks it over."""
+    from pimann.sim.footsteps import extract_footsteps
+    from pimann.sim.pushes import push_at_mid_single_support
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    q0 = standing_pose(sim_robot, sim_params)
+    source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
+    walk = stepping_trajectory(sim_robot, fast, source)
+    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    outcomes = []
+    for force in (0.0, 400.0):
+        push = push_at_mid_single_support(plan, "lateral", force, 0.1)
+        result = simulate_trajectory(walk, fast, push.start + 1.5, "offline", push)
+        outcomes.append(result.fallen)
+    assert outcomes == [False, True]
+
+
+def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params):
+    """MuJoCo, 60 N for 0.1 s toward the swing foot: its landing moves out, the robot stays up."""
+    from pimann.sim.footsteps import extract_footsteps
+    from pimann.sim.pushes import push_at_mid_single_support
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    q0 = standing_pose(sim_robot, sim_params)
+    source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
+    walk = stepping_trajectory(sim_robot, fast, source)
+    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    swing = int(np.argmin([plan.feet[s].t_off[0] for s in (0, 1)]))
+    landings = []
+    for force in (0.0, 60.0):
+        push = push_at_mid_single_support(plan, "lateral", force, 0.1)
+        result = simulate_trajectory(walk, fast, push.start + 0.6, "online", push)
+        assert not result.fallen
+        landings.append(result.footsteps.feet[swing].positions[1].copy())
+    outward = np.array([0.0, 1.0 if swing == 0 else -1.0])
+    assert (landings[1] - landings[0]) @ outward > 0.005
+    box = landing_box(sim_params.mpc, swing)
+    offset = landings[1] - plan.feet[swing].positions[1]
+    assert box[1, 0] - 1e-6 <= offset[1] <= box[1, 1] + 1e-6
+
+
+def test_cli_simulates_with_the_online_controller(tmp_path, capsys, sim_robot, sim_params):
+    from pimann.cli import main
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+    from pimann.trajectory import write_trajectory
+
+    q0 = standing_pose(sim_robot, sim_params)
+    plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
+    source = tmp_path / "walk.h5"
+    write_trajectory(source, stepping_trajectory(sim_robot, sim_params, plan, 25.0))
+    argv = ["simulate", str(source), "-o", str(tmp_path / "sim.h5"), "--duration", "0.6",
+            "--controller", "online"]  # fmt: skip
+    assert main(argv) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["controller"] == "online" and not summary["fallen"]
+    assert summary["mpc_solve_median_s"] > 0 and summary["simulated_s"] == pytest.approx(0.6)
