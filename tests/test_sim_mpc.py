@@ -244,11 +244,9 @@ def test_pushes_point_where_they_should():
     np.testing.assert_allclose(forward.force, [50.0, 0.0, 0.0], atol=1e-9)
 
 
-def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
-    """The offline controller in MuJoCo: 0 N walks on, a 400 N lateral push knocks it over."""
+def _two_step_walk(sim_robot, sim_params):
+    """(params at full speed, the synthetic 2-step walk, its footstep plan) for the push tests."""
     from pimann.sim.footsteps import extract_footsteps
-    from pimann.sim.pushes import push_at_mid_single_support
-    from pimann.sim.run import simulate_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
 
@@ -258,7 +256,15 @@ def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
     q0 = standing_pose(sim_robot, sim_params)
     source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
     walk = stepping_trajectory(sim_robot, fast, source)
-    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    return fast, walk, extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+
+
+def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
+    """The offline controller in MuJoCo: 0 N walks on, a 400 N lateral push knocks it over."""
+    from pimann.sim.pushes import push_at_mid_single_support
+    from pimann.sim.run import simulate_trajectory
+
+    fast, walk, plan = _two_step_walk(sim_robot, sim_params)
     outcomes = []
     for force in (0.0, 400.0):
         push = push_at_mid_single_support(plan, "lateral", force, 0.1)
@@ -269,19 +275,10 @@ def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
 
 def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params):
     """MuJoCo, 60 N for 0.1 s toward the swing foot: its landing moves out, the robot stays up."""
-    from pimann.sim.footsteps import extract_footsteps
     from pimann.sim.pushes import push_at_mid_single_support
     from pimann.sim.run import simulate_trajectory
-    from pimann.sim.synthetic import standing_feet, stepping_trajectory
-    from pimann.sim.wbc import standing_pose
 
-    fast = dataclasses.replace(
-        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
-    )
-    q0 = standing_pose(sim_robot, sim_params)
-    source = stepping_plan(standing_feet(sim_robot, q0), steps=2, step=0.1, start=0.2, end=0.2)
-    walk = stepping_trajectory(sim_robot, fast, source)
-    plan = extract_footsteps(sim_robot, walk, fast, standing_feet(sim_robot, q0))
+    fast, walk, plan = _two_step_walk(sim_robot, sim_params)
     swing = int(np.argmin([plan.feet[s].t_off[0] for s in (0, 1)]))
     landings = []
     for force in (0.0, 60.0):
