@@ -1,10 +1,12 @@
 """DVC stage `report`: results/ and paper_figures/ -> results/metrics.json (the study's key
 numbers, the pipeline's DVC metrics; pimann.key_metrics) and results/report.html (the study on
-one self-contained page; pimann.report)."""
+one self-contained page; pimann.report); README.md's results block from metrics.json
+(pimann.readme_results)."""
 
 from __future__ import annotations
 
 import argparse
+import json
 import logging
 import sys
 import time
@@ -13,6 +15,7 @@ from pathlib import Path
 from pimann.logs import parse_stage_args
 from pimann.params import load_params
 from pimann.paths import REPO_ROOT
+from pimann.readme_results import write_readme_results
 from pimann.report import write_report
 from pimann.stage import stage_entry
 
@@ -29,6 +32,8 @@ def main(argv: list[str] | None = None) -> None:
     metrics, report = write_report(
         REPO_ROOT / args.results, REPO_ROOT / args.figures, load_params()
     )
+    # README.md's results block (tracked by git, so a side effect, not a DVC out)
+    write_readme_results(REPO_ROOT / "README.md", json.loads(metrics.read_text()))
     log.info("%s, %s (%.1f MB) in %.1f s", metrics, report, report.stat().st_size / 1e6,
              time.perf_counter() - started)  # fmt: skip
 
