@@ -5,6 +5,8 @@ of the repository and without a network: every image and video is embedded as a 
 the style is inline, there is no script. From the pipeline's outputs alone (the report stage
 runs after evaluate, figures, simulate and data_report):
 
+- at a glance, first: the headline figures (`HEADLINE_FIGURES`) and a compact claims table
+  (each claim's status as a coloured mark, its reason folded under it), from results/claims.md;
 - the key numbers (pimann.key_metrics, also results/metrics.json);
 - the claims table (results/claims.md);
 - every figure of paper_figures/*.png;
@@ -35,6 +37,12 @@ import yaml
 REPORT_FILE = "report.html"
 MEDIA_TYPES = {".png": "image/png", ".gif": "image/gif", ".mp4": "video/mp4"}
 VIDEO_SUFFIXES = (".mp4", ".gif")
+HEADLINE_FIGURES = ("pi_weight_comparison", "base_displacement")  # sliding by w; drift, steering
+CLAIM_MARKS = {  # claims.md status: (mark, CSS class)
+    "holds": ("\u2714", "holds"), "holds within seed spread": ("\u2248", "spread"),
+    "holds (model stands still)": ("\u25d0", "still"), "does not hold": ("\u2718", "fails"),
+    "not comparable": ("\u2013", "na"), "reference": ("\u25cf", "reference"),
+}  # fmt: skip
 SIM_COLUMNS = (  # sim_summary.json run fields shown in the simulation table
     "model", "seed", "scenario", "steering", "controller", "success", "fallen", "fall_time_s",
     "simulated_s", "distance_walked_m", "steps", "foot_slip_m", "joint_rmse_rad",
@@ -54,6 +62,9 @@ figure { margin: 0; max-width: 540px; }
 figure img, figure video { width: 100%; height: auto; border: 1px solid #eee; }
 figcaption { font-size: 0.85em; color: #555; }
 .missing { color: #a33; }
+.mark { font-weight: bold; font-size: 1.1em; } .holds { color: #1a7f37; }
+.spread, .still { color: #b35900; } .fails { color: #c62828; } .na, .reference { color: #666; }
+.claims td details summary { cursor: pointer; }
 pre { background: #f7f7f7; padding: 0.5em; overflow-x: auto; font-size: 0.8em; }
 """
 
@@ -217,8 +228,51 @@ def _header(summary: dict[str, Any], metrics: dict[str, Any]) -> str:
     return "<p>" + ", ".join(facts) + ".</p>"
 
 
+def claim_rows(text: str) -> list[dict[str, str]]:
+    """The rows of results/claims.md's table as {column: cell}, `\\|` unescaped, `**` dropped."""
+    rows, header = [], None
+    for line in text.splitlines():
+        if not line.startswith("|"):
+            continue
+        cells = [c.strip().replace("\\|", "|") for c in re.split(r"(?<!\\)\|", line)[1:-1]]
+        if header is None:
+            header = cells
+        elif not set("".join(cells)) <= set("-: "):
+            rows.append(dict(zip(header, (c.strip("*") for c in cells), strict=False)))
+    return rows
+
+
+def _claims_glance(results: Path) -> str:
+    path = results / "claims.md"
+    if not path.is_file():
+        return _missing(path.name, "evaluate")
+    body = []
+    for row in claim_rows(path.read_text()):
+        status = row.get("status", "")
+        mark, css = CLAIM_MARKS.get(status, ("?", "na"))
+        why = html.escape(row.get("why", ""))
+        body.append(
+            f"<tr><td>{html.escape(row.get('id', ''))}</td>"
+            f"<td>{html.escape(row.get('claim (paper)', ''))}</td>"
+            f'<td class="status"><span class="mark {css}" title="{html.escape(status)}">{mark}'
+            f"</span> <details><summary>{html.escape(status)}</summary>{why}</details></td></tr>"
+        )
+    head = "<tr><th>id</th><th>claim (paper)</th><th>status (why: unfold)</th></tr>"
+    return f'<table class="claims"><thead>{head}</thead><tbody>{"".join(body)}</tbody></table>'
+
+
+def _glance(results: Path, figures: Path) -> str:
+    """The headline figures and the compact claims table."""
+    paths = [figures / f"{name}.png" for name in HEADLINE_FIGURES]
+    found = [p for p in paths if p.is_file()]
+    shown = _figures(found) if found else _missing("the headline figures", "figures")
+    note = "<p>Each claim's status; unfold it for the reason (the numbers: further down).</p>"
+    return shown + note + _claims_glance(results)
+
+
 SECTIONS = (
-    ("numbers", "Key numbers"), ("claims", "The paper's claims"), ("figures", "Figures"),
+    ("glance", "At a glance"), ("numbers", "Key numbers"), ("claims", "The paper's claims"),
+    ("figures", "Figures"),
     ("following", "Command following"), ("simulation", "MuJoCo"), ("data", "The data"),
     ("time", "Time budget"), ("params", "Parameters"),
 )  # fmt: skip
@@ -243,10 +297,14 @@ def build_report(
     following_png = results / "command_following.png"
     data_png = results / "data_report.png"
     paper = sorted(figures.glob("*.png"))
+    others = [p for p in paper if p.stem not in HEADLINE_FIGURES]  # the headline ones lead
     bodies = {
+        "glance": _glance(results, figures),
         "numbers": _key_numbers(metrics),
         "claims": _markdown_file(results / "claims.md", "evaluate"),
-        "figures": _figures(paper) if paper else _missing("paper_figures/*.png", "figures"),
+        "figures": (_figures(others) if others else "<p>The headline figures above.</p>")
+        if paper
+        else _missing("paper_figures/*.png", "figures"),
         "following": (_figures([following_png]) if following_png.is_file() else "")
         + _markdown_file(results / "command_following.md", "evaluate"),
         "simulation": _simulation(results),

@@ -4,6 +4,7 @@ is installed, every image and video loads in it."""
 
 from __future__ import annotations
 
+import html
 import json
 import re
 import shutil
@@ -18,7 +19,14 @@ from test_figures import crafted_results
 from test_key_metrics import SIM_SUMMARY
 
 from pimann.params import load_params
-from pimann.report import build_report, markdown_html, write_report
+from pimann.report import (
+    CLAIM_MARKS,
+    HEADLINE_FIGURES,
+    build_report,
+    claim_rows,
+    markdown_html,
+    write_report,
+)
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable",
             "chromium-headless-shell", "chrome-headless-shell")  # fmt: skip
@@ -91,6 +99,56 @@ def test_report_embeds_everything_and_reaches_nothing(study, params):
     assert "<details>" in page and params.profile in page  # the params, collapsed
     assert "<table>" in page and "| model |" not in page  # Markdown tables rendered
     assert json.loads(metrics_path.read_text())["sim.runs"] == 2
+
+
+def _sections(page: str) -> list[tuple[str, str]]:
+    """(id, body) of every <section> of the page, in order."""
+    return re.findall(r'<section id="([^"]+)">(.*?)</section>', page, re.DOTALL)
+
+
+def test_the_page_leads_with_the_headline_figures_and_a_compact_claims_table(
+    study, params, tmp_path
+):
+    results, _ = study
+    figures = tmp_path / "paper_figures"
+    figures.mkdir()
+    for k, name in enumerate((*HEADLINE_FIGURES, "joint_tracking")):
+        imageio.imwrite(figures / f"{name}.png", np.full((30, 40 + k, 3), 50, dtype=np.uint8))
+    page = build_report(results, figures, params, {"claims.holding": 1, "claims.total": 14})
+    sections = _sections(page)
+    assert sections[0][0] == "glance" and page.index('id="glance"') < page.index('id="numbers"')
+    glance, figures_body = sections[0][1], dict(sections)["figures"]
+    shown = [value for tag, name, value in attributes(glance) if tag == "img" and name == "alt"]
+    assert shown == [name.replace("_", " ") for name in HEADLINE_FIGURES]
+    alts = [value for tag, name, value in attributes(figures_body) if name == "alt"]
+    assert alts == ["joint tracking"]  # the headline figures are not repeated
+
+    # one row per row of claims.md, each a coloured mark and its reason folded under it
+    claims_md = (results / "claims.md").read_text()
+    expected = [line for line in claims_md.splitlines() if re.match(r"\| (C\d+|D) \|", line)]
+    table = re.search(r'<table class="claims">(.*?)</table>', glance, re.DOTALL).group(1)
+    rows = re.findall(r"<tr><td>(.*?)</td>.*?</tr>", table, re.DOTALL)
+    assert len(rows) == len(expected) > 0
+    cells = re.findall(
+        r'<span class="mark (\w+)" title="([^"]+)">(.)</span> '
+        r"<details><summary>([^<]+)</summary>(.*?)</details>",
+        table,
+    )
+    assert len(cells) == len(expected)
+    for css, title, mark, summary, reason in cells:
+        assert (mark, css) == CLAIM_MARKS[title] and summary == title and reason
+    first = claim_rows(claims_md)[1]  # C1, after the data's row D
+    assert first["id"] == "C1" and html.escape(first["why"]) in table
+
+
+def test_claim_rows_read_escaped_pipes_and_bold_statuses():
+    text = (
+        "# t\n\n| id | claim (paper) | status | why |\n|---|---|---|---|\n"
+        "| C9 | pitch \\|x\\| grows | **holds** | as claimed |\n"
+    )
+    assert claim_rows(text) == [
+        {"id": "C9", "claim (paper)": "pitch |x| grows", "status": "holds", "why": "as claimed"}
+    ]
 
 
 def test_missing_inputs_say_which_stage(study, params, tmp_path):
