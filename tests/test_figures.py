@@ -194,3 +194,79 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
     reference = [line for line in fig.axes[1].get_lines() if line.get_label() == "reference"][0]
     gap = np.abs(measured.get_ydata() - reference.get_ydata()).max()
     assert gap == pytest.approx(np.degrees(0.05), rel=1e-6)  # the online run's own traces
+
+
+# --- what the paper's figures draw: series, labels and data read back from the artists ------
+
+
+def test_box_plot_draws_one_box_per_weight_at_the_seed_median(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    frame = results.metrics
+    unsteered = frame[(frame["scenario"] == params.figures.scenario) & ~frame["steering"]]
+    for ax, kind in zip(fig.axes, ("linear", "angular"), strict=True):
+        medians = [line for line in ax.get_lines() if line.get_color() == "tab:orange"]
+        assert len(medians) == len(params.figures.box_weights) == len(ax.patches)
+        for line, weight in zip(medians, params.figures.box_weights, strict=True):
+            model = unsteered["model"] == f"w{weight:g}"  # not the baseline (its w is 0 too)
+            seeds = unsteered.loc[model, f"support_rmse_{kind}_total"]
+            assert line.get_ydata()[0] == pytest.approx(np.median(seeds))
+        assert ax.get_xlabel() == "PI weight $w$" and ax.get_ylim()[0] == 0
+
+
+def test_base_displacement_draws_three_axes_per_condition_from_the_time_series(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["base_displacement"](results, params.figures)
+    names = ("base_baseline", "base_pi", "base_pi_steering")
+    assert len(fig.axes) == 2 * len(names)  # positions on top, orientations below
+    top, bottom = fig.axes[: len(names)], fig.axes[len(names) :]
+    # subplots come row by row: axes[k] is condition k's positions, axes[3 + k] its angles
+    assert top[0].get_ylabel() == "position (m)" and bottom[0].get_ylabel() == "orientation (rad)"
+    assert all(ax.get_xlabel() == "time (s)" for ax in bottom)
+    for k, name in enumerate(names):
+        table = results.timeseries[name]
+        lines = {line.get_label(): line for line in top[k].get_lines()}
+        angles = {line.get_label(): line for line in bottom[k].get_lines()}
+        assert sorted(lines) == ["x", "y", "z"] and sorted(angles) == ["pitch", "roll", "yaw"]
+        assert np.allclose(lines["y"].get_xdata(), table["time"])
+        assert np.allclose(lines["y"].get_ydata(), table["base_y"])
+        assert np.allclose(angles["yaw"].get_ydata(), table["base_yaw"])
+    assert "($w$=10)" in top[1].get_title()  # the PI model's weight, from metrics.csv
+
+
+def test_ground_projection_draws_each_conditions_path_and_the_desired_line(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    fig = FIGURES["ground_projection"](results, params.figures)
+    (ax,) = fig.axes
+    paths = [line for line in ax.get_lines() if not line.get_label().startswith("_")]
+    assert len(paths) == 4  # the desired direction and three conditions (end dots unlabelled)
+    desired = next(line for line in paths if line.get_label() == "desired direction")
+    assert np.allclose(desired.get_ydata(), 0.0)
+    drawn = sorted((line.get_xdata()[-1], line.get_ydata()[-1]) for line in paths[1:])
+    tables = [results.timeseries[n] for n in ("base_baseline", "base_pi", "base_pi_steering")]
+    expected = sorted((t["base_x"].iloc[-1], t["base_y"].iloc[-1]) for t in tables)
+    assert np.allclose(drawn, expected)
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("$x$ (m)", "$y$ (m)")
+
+
+def test_foot_figures_draw_degrees_and_centimetres_of_every_weight(params, tmp_path):
+    results = load_results(crafted_results(tmp_path / "results", params))
+    rotations = FIGURES["foot_rotations"](results, params.figures)
+    feet = {w: results.timeseries[f"feet_w{w}"] for w in (0, 1, 10, 20, 100)}
+    for ax, side in zip(rotations.axes, ("left", "right"), strict=True):
+        lines = ax.get_lines()
+        assert [line.get_label() for line in lines] == [f"$w$={w:g}" for w in feet]
+        for line, table in zip(lines, feet.values(), strict=True):
+            assert np.allclose(line.get_ydata(), np.degrees(table[f"{side}_sole_pitch"]))
+    # the crafted pitch is 0.002 w rad: the drawn peaks grow with w, at most 0.2 rad = 11.5 deg
+    peaks = [np.abs(line.get_ydata()).max() for line in rotations.axes[0].get_lines()]
+    assert peaks == sorted(peaks) and 11.0 < peaks[-1] <= np.degrees(0.2)
+    heights = FIGURES["foot_heights"](results, params.figures)
+    weights = [float(w) for w in params.figures.foot_height_weights]
+    assert [ax.get_title() for ax in heights.axes] == [f"$w$={w:g}" for w in weights]
+    for ax, weight in zip(heights.axes, weights, strict=True):
+        table = results.timeseries[f"feet_w{weight:g}"]
+        left = next(line for line in ax.get_lines() if line.get_label() == "left")
+        assert np.allclose(left.get_ydata(), 100 * table["left_foot_height"])  # cm
+        assert len(ax.collections) == 2  # each foot's contact shading
+        assert ax.get_ylabel() == "foot height (cm)"
