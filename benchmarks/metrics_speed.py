@@ -14,11 +14,11 @@ import time
 
 import numpy as np
 
-from pimann.contacts import detect_contacts
-from pimann.metrics import trajectory_metrics, trajectory_time_series
-from pimann.params import load_params
-from pimann.robot import load_robot
-from pimann.trajectory import Trajectory
+from pimann.core.contacts import detect_contacts
+from pimann.core.params import load_params
+from pimann.core.robot import load_robot
+from pimann.core.trajectory import Trajectory
+from pimann.evaluate.metrics import trajectory_metrics, trajectory_time_series
 
 BUDGET_MS = 50.0
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pimann.params import EvaluateParams, SimulateParams, load_params
-from pimann.robot import Robot, load_robot
+from pimann.core.params import EvaluateParams, SimulateParams, load_params
+from pimann.core.robot import Robot, load_robot
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
 
@@ -65,8 +65,8 @@ REAL_BACKWARD = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk-back_
 def real_walks():
     """{name: trajectory}: two real Bandai Namco clips (forward, backward) retargeted as the
     retarget stage does it, and the forward one's mirror (about 4 s of CPU)."""
+    from pimann.core.paths import mocap_dir
     from pimann.mocap.mirror import mirror_trajectory
-    from pimann.paths import mocap_dir
     from pimann.retarget import retarget_file
 
     params = load_params()

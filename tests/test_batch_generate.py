@@ -1,4 +1,4 @@
-"""Batched generation (pimann.batch_generate): a row of a batch is the same rollout alone.
+"""Batched generation (pimann.generate.batch_generate): a row of a batch is the same rollout alone.
 
 Float64 models (the analytic gait of test_generate and a tiny trained MANN), so the only
 difference a batch could make is rounding; rows with different scripts (stand segments
@@ -14,16 +14,16 @@ import pytest
 import torch
 from test_generate import IDENTITY, LAYOUT, GaitModel
 
-from pimann.batch_generate import BatchGenerator
-from pimann.contacts import FEET
-from pimann.feature_layout import Normalisation
-from pimann.features import clip_features
-from pimann.generate import RolloutSpec, generate_batch, generate_rollout
-from pimann.leg_odometry import SoleFrames
-from pimann.mann import MANN
-from pimann.params import ModelParams, MotionSegment, StandSegment
-from pimann.rollout_network import NumpyMANN
-from pimann.standing import StandingPose
+from pimann.core.contacts import FEET
+from pimann.core.params import ModelParams, MotionSegment, StandSegment
+from pimann.generate.batch_generate import BatchGenerator
+from pimann.generate.generator import RolloutSpec, generate_batch, generate_rollout
+from pimann.generate.leg_odometry import SoleFrames
+from pimann.generate.rollout_network import NumpyMANN
+from pimann.learn.feature_layout import Normalisation
+from pimann.learn.features import clip_features
+from pimann.learn.mann import MANN
+from pimann.learn.standing import StandingPose
 
 M, S = MotionSegment, StandSegment
 SCRIPTS = [
@@ -77,7 +77,7 @@ def batch_against_alone(
 
 @pytest.fixture(scope="module")
 def params():
-    from pimann.params import load_params
+    from pimann.core.params import load_params
 
     return load_params()
 

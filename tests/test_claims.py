@@ -1,4 +1,5 @@
-"""The paper's claims (pimann.claims) on crafted metrics tables: the statuses, the seed-spread
+"""The paper's claims (pimann.evaluate.claims) on crafted metrics tables: the statuses, the
+seed-spread
 and standing-still rules, C1's tolerance, C4's reduction and the claims table."""
 
 from __future__ import annotations
@@ -8,8 +9,9 @@ import re
 import pandas as pd
 import pytest
 
-from pimann.claim_rules import CONFIGURATION_HELD
-from pimann.claims import (
+from pimann.core.params import load_params
+from pimann.evaluate.claim_rules import CONFIGURATION_HELD
+from pimann.evaluate.claims import (
     FAILS,
     HOLDS,
     NOT_COMPARABLE,
@@ -20,8 +22,7 @@ from pimann.claims import (
     data_claim,
     evaluate_claims,
 )
-from pimann.params import load_params
-from pimann.rollout_layout import BASELINE
+from pimann.generate.rollout_layout import BASELINE
 
 WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
 # seed medians of a study that agrees with the paper
@@ -246,7 +247,7 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
 def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
     """A failing C9 says when train.pi_gradient keeps L_B's gradient off the configuration:
     exactly the values whose training loss detaches the predicted joints."""
-    from pimann.training_loss import _HELD
+    from pimann.learn.training_loss import _HELD
 
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)

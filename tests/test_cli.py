@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from pimann.cli import main
-from pimann.paths import shared_dir
+from pimann.core.paths import shared_dir
 
 MVNX = shared_dir() / "data" / "xsens" / "mvnx" / "Meri-020.mvnx"
 
@@ -62,7 +62,7 @@ def test_every_argument_has_help_and_generate_lists_the_scenarios():
     import argparse
 
     from pimann.cli import _parser
-    from pimann.params import load_params
+    from pimann.core.params import load_params
 
     parser = _parser()
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))

@@ -19,12 +19,12 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from test_data_report import RATE, make_trajectory
 from test_generate import GaitModel, roll
 
-from pimann import command_following as cf
-from pimann.clip_commands import clip_commands, segment_class
-from pimann.command_following_figure import fig_command_following
-from pimann.figures import style
-from pimann.following import summary_table
-from pimann.params import MotionSegment, StandSegment, load_params
+from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.evaluate import command_following as cf
+from pimann.evaluate.command_following_figure import fig_command_following
+from pimann.evaluate.following import summary_table
+from pimann.generate.clip_commands import clip_commands, segment_class
+from pimann.report.figures import style
 
 DT = 1.0 / RATE
 
@@ -196,7 +196,7 @@ def test_follow_measures_of_a_slow_drifting_follower(robot):
 
 
 def test_follow_measures_reject_a_rollout_of_another_script(robot):
-    from pimann.errors import PimannError
+    from pimann.core.errors import PimannError
 
     with pytest.raises(PimannError, match="frames"):
         cf.follow_measures(make_trajectory(np.zeros((100, 2))), SCRIPT, robot, EVALUATE_PARAMS)
@@ -328,7 +328,7 @@ def test_summary_medians_and_criteria():
 
 
 def test_summary_needs_the_key_columns():
-    from pimann.errors import PimannError
+    from pimann.core.errors import PimannError
 
     with pytest.raises(PimannError, match="seed"):
         cf.summarise_following(crafted_rows().drop(columns="seed"))

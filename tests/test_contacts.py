@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 from conftest import EVALUATE_PARAMS
 
-from pimann.contacts import (
+from pimann.core.contacts import (
     FEET,
     SchmittTrigger,
     contacts_from_heights,
@@ -16,10 +16,10 @@ from pimann.contacts import (
     lowest_corner_heights,
     trajectory_configurations,
 )
-from pimann.errors import PimannError
-from pimann.params import EvaluateParams
-from pimann.robot import SOLE_CORNERS
-from pimann.trajectory import Trajectory
+from pimann.core.errors import PimannError
+from pimann.core.params import EvaluateParams
+from pimann.core.robot import SOLE_CORNERS
+from pimann.core.trajectory import Trajectory
 
 PARAMS = EVALUATE_PARAMS
 DT = 0.02  # 50 Hz

@@ -1,4 +1,5 @@
-"""The data's own level of the sliding metrics (pimann.data_reference) on synthetic clips whose
+"""The data's own level of the sliding metrics (pimann.evaluate.data_reference) on synthetic clips
+whose
 answer is known: the standing robot slid along its heading at a known speed."""
 
 from __future__ import annotations
@@ -10,11 +11,11 @@ import pinocchio as pin
 import pytest
 from conftest import EVALUATE_PARAMS
 
-from pimann.data_reference import FRAMES, clip_reference, data_reference
-from pimann.features import split_sources
-from pimann.params import load_params
-from pimann.robot import load_robot
-from pimann.trajectory import Trajectory, write_collection
+from pimann.core.params import load_params
+from pimann.core.robot import load_robot
+from pimann.core.trajectory import Trajectory, write_collection
+from pimann.evaluate.data_reference import FRAMES, clip_reference, data_reference
+from pimann.learn.features import split_sources
 
 RATE = 50.0
 HEADING = 0.4

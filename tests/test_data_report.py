@@ -11,13 +11,13 @@ import pytest
 from conftest import EVALUATE_PARAMS
 from scipy.spatial.transform import Rotation
 
-from pimann import data_report as dr
-from pimann import data_report_output as dro
-from pimann import motion_classes as mc
-from pimann.metrics import trajectory_metrics
-from pimann.params import load_params
-from pimann.robot import STANDING_BASE_HEIGHT, STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
-from pimann.trajectory import Trajectory, write_collection
+from pimann.core.params import load_params
+from pimann.core.robot import STANDING_BASE_HEIGHT, STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
+from pimann.core.trajectory import Trajectory, write_collection
+from pimann.evaluate import data_report as dr
+from pimann.evaluate import data_report_output as dro
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.learn import motion_classes as mc
 
 RATE = 50.0
 
@@ -151,7 +151,8 @@ def test_sliding_of_a_foot_sliding_at_a_known_speed(params):
 
 
 def test_sliding_is_the_evaluate_stage_metric(robot, params, rng):
-    """Per clip, the frames sum to pimann.metrics' total RMSE, under either contact rule."""
+    """Per clip, the frames sum to pimann.evaluate.metrics' total RMSE, under either contact
+    rule."""
     n = 150
     joints = STANDING_JOINTS + 0.1 * np.sin(np.arange(n)[:, None] / 9.0 + rng.uniform(0, 6, 26))
     contacts = rng.random((n, 2)) < 0.6

@@ -13,10 +13,12 @@ import torch
 from test_claims import REFERENCE, crafted_metrics
 from test_rollouts import benchmark_collection
 
-from pimann.claims import claims_markdown
-from pimann.command_following import summarise_following
-from pimann.errors import PimannError
-from pimann.evaluate import (
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.trajectory import read_trajectory
+from pimann.evaluate.claims import claims_markdown
+from pimann.evaluate.command_following import summarise_following
+from pimann.evaluate.evaluation import (
     evaluate_all,
     provenance,
     read_metrics,
@@ -24,12 +26,10 @@ from pimann.evaluate import (
     summarise,
     write_results,
 )
-from pimann.key_metrics import following_metrics
-from pimann.metrics import trajectory_metrics
-from pimann.params import load_params
-from pimann.rollout_layout import BASELINE, read_script, select_rows
-from pimann.rollouts import run_rollouts
-from pimann.trajectory import read_trajectory
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.generate.rollout_layout import BASELINE, read_script, select_rows
+from pimann.generate.rollouts import run_rollouts
+from pimann.report.key_metrics import following_metrics
 
 
 @pytest.fixture(scope="module")
@@ -83,10 +83,10 @@ def test_results_record_provenance(params, tmp_path):
 
 
 def _tiny_models(root, weight: float, variant: str, seeds):
-    from pimann.feature_layout import FeatureLayout, Normalisation
-    from pimann.mann import MANN
-    from pimann.model_files import save_model
-    from pimann.params import ModelParams
+    from pimann.core.params import ModelParams
+    from pimann.learn.feature_layout import FeatureLayout, Normalisation
+    from pimann.learn.mann import MANN
+    from pimann.learn.model_files import save_model
 
     layout = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, variant)
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
@@ -104,7 +104,7 @@ def _tiny_models(root, weight: float, variant: str, seeds):
 
 
 def test_rollout_and_evaluate_end_to_end(params, tmp_path):
-    from pimann.params import MotionSegment
+    from pimann.core.params import MotionSegment
 
     # the data's level: one clip at 0.5 m/s (5 s of forward walking), one standing; the test
     # clips (benchmark scripts): a 2 s walk at 0.4 m/s and its 'mirror'; the training clips'
@@ -202,8 +202,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
 
 def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
     """A PimannError raised in a spawned worker comes back as a PimannError, not a crash."""
-    from pimann.evaluate import _metrics_job
-    from pimann.parallel import pool_map
+    from pimann.core.parallel import pool_map
+    from pimann.evaluate.evaluation import _metrics_job
 
     missing = tmp_path / "nope.h5"
     with pytest.raises(PimannError, match="nope.h5: file not found"):
@@ -211,7 +211,7 @@ def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
 
 
 def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp_path):
-    from pimann.params import MotionSegment
+    from pimann.core.params import MotionSegment
 
     short = dataclasses.replace(
         params,

@@ -12,12 +12,18 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
-from pimann.feature_layout import FeatureLayout, window_layout
-from pimann.features import build_dataset, clip_features, read_dataset, split_sources, write_dataset
-from pimann.params import load_params
-from pimann.robot import N_JOINTS, STANDING_JOINTS
-from pimann.trajectory import Trajectory, write_trajectory
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.robot import N_JOINTS, STANDING_JOINTS
+from pimann.core.trajectory import Trajectory, write_trajectory
+from pimann.learn.feature_layout import FeatureLayout, window_layout
+from pimann.learn.features import (
+    build_dataset,
+    clip_features,
+    read_dataset,
+    split_sources,
+    write_dataset,
+)
 
 RATE = 50.0
 PITCH = 0.3  # a fixed base tilt, so that base and world frames differ in every axis
@@ -245,7 +251,7 @@ def test_split_holds_out_every_class_in_different_styles(params):
 
 
 def test_a_clip_class_is_its_walking_majority_unless_it_mostly_stands():
-    from pimann.motion_classes import CLASSES, majority_class
+    from pimann.learn.motion_classes import CLASSES, majority_class
 
     def counts(**frames):
         return np.array([frames.get(name, 0) for name in CLASSES])
@@ -257,7 +263,7 @@ def test_a_clip_class_is_its_walking_majority_unless_it_mostly_stands():
 
 
 def test_settled_contacts_drop_frames_around_switches():
-    from pimann.features import settled_contacts
+    from pimann.learn.features import settled_contacts
 
     left = np.array([1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 0], bool)
     flags = np.stack([left, np.ones_like(left)], axis=1)
@@ -268,7 +274,7 @@ def test_settled_contacts_drop_frames_around_switches():
 
 
 def test_normalisation_uses_training_statistics_only(params, tmp_path):
-    from pimann.features import write_dataset
+    from pimann.learn.features import write_dataset
 
     clips = synthetic_collection(n_sources=6)
     dataset = build_dataset(clips, params.features, "full")
@@ -441,7 +447,7 @@ def test_time_reversed_training_clips_walk_backward_beside_their_original(params
     """Forward clips played backward: the same poses in reverse order, their features those of
     backward walking (the window's velocities negated and reversed), on the original's side of
     the split; test clips are never reversed."""
-    from pimann.features import time_reversed
+    from pimann.learn.features import time_reversed
 
     clip = synthetic_clip(200, np.array([0.5, 0.0, 0.0]), 0.0, source="walker")
     back = time_reversed(clip)

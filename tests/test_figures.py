@@ -12,11 +12,11 @@ import pandas as pd
 import pytest
 from test_claims import REFERENCE, crafted_metrics
 
-from pimann.evaluate import provenance, write_results
-from pimann.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
-from pimann.params import load_params
-from pimann.robot import JOINT_NAMES
-from pimann.rollout_layout import RolloutKey
+from pimann.core.params import load_params
+from pimann.core.robot import JOINT_NAMES
+from pimann.evaluate.evaluation import provenance, write_results
+from pimann.generate.rollout_layout import RolloutKey
+from pimann.report.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +95,7 @@ def test_missing_data_skips_the_figure(params, tmp_path, caplog):
     results = crafted_results(tmp_path / "results", params, sim=False)
     for path in (results / "timeseries").glob("feet_*.csv"):
         path.unlink()
-    caplog.set_level(logging.INFO, logger="pimann.figures")
+    caplog.set_level(logging.INFO, logger="pimann.report.figures")
     written = make_figures(results, tmp_path / "out", params.figures)
     assert set(written) == set(FIGURES) - {"joint_tracking", "foot_rotations", "foot_heights"}
     assert "joint_tracking: no simulation traces" in caplog.text

@@ -18,22 +18,22 @@ import torch
 from scipy.spatial.transform import Rotation
 from torch import nn
 
-from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configurations
-from pimann.errors import PimannError
-from pimann.feature_layout import FeatureLayout, Normalisation
-from pimann.features import clip_features, matrix_to_rpy
-from pimann.future_window import interpolation
-from pimann.generate import (
+from pimann.core.contacts import detect_contacts, foot_kinematics, trajectory_configurations
+from pimann.core.errors import PimannError
+from pimann.core.params import ModelParams, MotionSegment, StandSegment, load_params
+from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
+from pimann.core.rotations import yaw_of
+from pimann.core.trajectory import read_trajectory
+from pimann.generate.generator import (
     generate,
     generate_file,
     generate_rollout,
     scenario_steps,
 )
-from pimann.mann import MANN
-from pimann.params import ModelParams, MotionSegment, StandSegment, load_params
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
-from pimann.rotations import yaw_of
-from pimann.trajectory import read_trajectory
+from pimann.learn.feature_layout import FeatureLayout, Normalisation
+from pimann.learn.features import clip_features, matrix_to_rpy
+from pimann.learn.future_window import interpolation
+from pimann.learn.mann import MANN
 
 LAYOUT = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, "full")
 IDENTITY = Normalisation(
@@ -344,7 +344,7 @@ def test_trained_mann_steps_with_switching_contacts(robot, params, one_thread):
 
 
 def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, tmp_path):
-    from pimann.model_files import save_model
+    from pimann.learn.model_files import save_model
 
     torch.manual_seed(0)
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
@@ -398,7 +398,7 @@ def test_ground_projected_baseline_keeps_yaw_only(robot, params):
 
 
 def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
-    from pimann.standing import StandingPose
+    from pimann.learn.standing import StandingPose
 
     nominal = StandingPose.nominal()
     joints = nominal.joints.copy()

@@ -1,4 +1,5 @@
-"""The study's key numbers (pimann.key_metrics): results/metrics.json, the pipeline's only DVC
+"""The study's key numbers (pimann.report.key_metrics): results/metrics.json, the pipeline's only
+DVC
 metrics, flat and at most a hundred values, from a crafted results/ folder."""
 
 from __future__ import annotations
@@ -11,19 +12,19 @@ from test_claims import AGREEING, REFERENCE
 from test_command_following import crafted_rows
 from test_figures import crafted_results
 
-from pimann import command_following as cf
-from pimann.claims import HOLDS, evaluate_claims
-from pimann.errors import PimannError
-from pimann.evaluate import read_metrics
-from pimann.key_metrics import (
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.evaluate import command_following as cf
+from pimann.evaluate.claims import HOLDS, evaluate_claims
+from pimann.evaluate.evaluation import read_metrics
+from pimann.report.key_metrics import (
     MAX_VALUES,
     STATUS_CODES,
     key_metrics,
     sim_metrics,
     write_key_metrics,
 )
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
 
 SIM_SUMMARY = {
     "profile": "quick",

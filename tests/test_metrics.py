@@ -10,19 +10,19 @@ import pinocchio as pin
 import pytest
 from conftest import EVALUATE_PARAMS, random_configuration
 
-from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
-from pimann.errors import PimannError
-from pimann.manifold_differences import manifold_velocities
-from pimann.metrics import (
+from pimann.core.contacts import FEET, foot_kinematics, trajectory_configurations
+from pimann.core.errors import PimannError
+from pimann.core.params import EvaluateParams
+from pimann.core.robot import JOINT_NAMES, SOLE_HALF_LENGTH
+from pimann.core.trajectory import Trajectory, write_collection, write_trajectory
+from pimann.evaluate.manifold_differences import manifold_velocities
+from pimann.evaluate.metrics import (
     aggregate,
     in_representation,
     metrics_for_file,
     trajectory_metrics,
     trajectory_time_series,
 )
-from pimann.params import EvaluateParams
-from pimann.robot import JOINT_NAMES, SOLE_HALF_LENGTH
-from pimann.trajectory import Trajectory, write_collection, write_trajectory
 
 PARAMS = EVALUATE_PARAMS
 RATE = 50.0
@@ -448,7 +448,7 @@ def test_errors_inside_a_file_name_the_file_and_the_group(robot, tmp_path):
 
 
 def test_about_names_the_outer_file_and_keeps_the_frame():
-    from pimann.errors import about
+    from pimann.core.errors import about
 
     with pytest.raises(PimannError) as caught, about("run.h5", "simulate run x"):
         raise PimannError(None, "DCM/ZMP plan not solved", frame=3)

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from pimann.errors import PimannError
-from pimann.params import DEFAULT_PARAMS, load_params
+from pimann.core.errors import PimannError
+from pimann.core.params import DEFAULT_PARAMS, load_params
 
 
 def _write(tmp_path, raw: dict):

@@ -7,9 +7,17 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.robot import (
+    JOINT_NAMES,
+    SEGMENTS,
+    STANDING_BASE_HEIGHT,
+    STANDING_BASE_QUATERNION_XYZW,
+    STANDING_JOINTS,
+)
+from pimann.core.trajectory import Trajectory, write_trajectory
 from pimann.mocap.human_motion import HumanMotion
-from pimann.render import (
+from pimann.render.trajectory import (
     LEFT_COLOUR,
     RIGHT_COLOUR,
     human_skeleton,
@@ -18,14 +26,6 @@ from pimann.render import (
     render_trajectory,
     robot_skeleton,
 )
-from pimann.robot import (
-    JOINT_NAMES,
-    SEGMENTS,
-    STANDING_BASE_HEIGHT,
-    STANDING_BASE_QUATERNION_XYZW,
-    STANDING_JOINTS,
-)
-from pimann.trajectory import Trajectory, write_trajectory
 
 W, H = 320, 240
 

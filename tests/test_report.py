@@ -1,4 +1,4 @@
-"""The report page (pimann.report) from a crafted results/ folder: self-contained (every
+"""The report page (pimann.report.page) from a crafted results/ folder: self-contained (every
 image and video a data: URI, no http(s) address, no script), and, where a headless Chromium
 is installed, every image and video loads in it."""
 
@@ -17,8 +17,8 @@ from test_command_following import crafted_rows
 from test_figures import crafted_results
 from test_key_metrics import SIM_SUMMARY
 
-from pimann.params import load_params
-from pimann.report import build_report, markdown_html, write_report
+from pimann.core.params import load_params
+from pimann.report.page import build_report, markdown_html, write_report
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable",
             "chromium-headless-shell", "chrome-headless-shell")  # fmt: skip

@@ -8,15 +8,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pimann.core.params import load_params
+from pimann.core.paths import mocap_dir
+from pimann.core.robot import SEGMENTS, STANDING_JOINTS
 from pimann.mocap.clips import read_take, take_of
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample
-from pimann.params import load_params
-from pimann.paths import mocap_dir
 from pimann.retarget import retarget_motion
 from pimann.retarget.ik import RetargetIK
 from pimann.retarget.quality import frame_measures, summarize
-from pimann.robot import SEGMENTS, STANDING_JOINTS
 
 REAL_CLIP = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"
 
@@ -135,7 +135,11 @@ def test_a_flight_phase_keeps_a_foot_down_and_every_sole_above_the_floor(robot, 
     # the motion-matching take jogs through a 0.15 s flight (no foot down) at 72.6 s: the
     # robot walks it with the foot that left last still planted (it once sank 28 cm and
     # put a sole 14 cm under the floor)
-    from pimann.contacts import foot_kinematics, lowest_corner_heights, trajectory_configurations
+    from pimann.core.contacts import (
+        foot_kinematics,
+        lowest_corner_heights,
+        trajectory_configurations,
+    )
     from pimann.mocap.clips import slice_motion
 
     path = mocap_dir() / "motionmatching-locomotion/locomotion.bvh"

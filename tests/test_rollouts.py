@@ -1,4 +1,5 @@
-"""The rollouts' layout (pimann.rollout_layout) and runner (pimann.rollouts): paths, the
+"""The rollouts' layout (pimann.generate.rollout_layout) and runner (pimann.generate.rollouts):
+paths, the
 table's model names, and that both sit apart from the evaluation (the layout also apart from
 the generator)."""
 
@@ -15,12 +16,13 @@ import pandas as pd
 import pytest
 from test_data_reference import walking_clip
 
-from pimann.benchmark_clips import benchmark_clips, benchmark_scripts
-from pimann.clip_commands import clip_commands
-from pimann.errors import PimannError
-from pimann.params import MotionSegment, StandSegment, load_params
-from pimann.paths import REPO_ROOT
-from pimann.rollout_layout import (
+from pimann.core.errors import PimannError
+from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.trajectory import write_collection
+from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
+from pimann.generate.clip_commands import clip_commands
+from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,
     TRAINING,
@@ -38,10 +40,14 @@ from pimann.rollout_layout import (
     select_rows,
     weight_label,
 )
-from pimann.rollouts import models_record, rollout_scripts
-from pimann.trajectory import write_collection
+from pimann.generate.rollouts import models_record, rollout_scripts
 
-EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
+EVALUATION = (
+    "pimann.evaluate.evaluation",
+    "pimann.evaluate.claims",
+    "pimann.evaluate.claim_rules",
+    "pimann.evaluate.data_reference",
+)
 
 
 def test_rollout_paths_round_trip(tmp_path):
@@ -136,17 +142,20 @@ def test_scripts_round_trip_through_json():
 
 GENERATION = (
     "torch",
-    "pimann.generate",
-    "pimann.batch_generate",
-    "pimann.train",
-    "pimann.model_files",
-    "pimann.mann",
+    "pimann.generate.generator",
+    "pimann.generate.batch_generate",
+    "pimann.learn.train",
+    "pimann.learn.model_files",
+    "pimann.learn.mann",
 )
 
 
 @pytest.mark.parametrize(
     "module, forbidden",
-    [("pimann.rollouts", EVALUATION), ("pimann.rollout_layout", EVALUATION + GENERATION)],
+    [
+        ("pimann.generate.rollouts", EVALUATION),
+        ("pimann.generate.rollout_layout", EVALUATION + GENERATION),
+    ],
 )
 def test_the_layout_imports_neither_generation_nor_evaluation(module, forbidden):
     code = f"import sys, {module}; print(sorted(m for m in sys.modules if m in {forbidden!r}))"
@@ -170,17 +179,17 @@ def test_rollout_users_import_the_layout_not_the_evaluation():
     ]
     for path in users:
         assert not _imports(path) & set(EVALUATION), path
-    assert "pimann.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
-    assert "pimann.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
+    assert "pimann.generate.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
+    assert "pimann.generate.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
 
 
 def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
     """One batch per seed (scripts x steering): each file as `pimann generate` writes it."""
     from test_evaluate import _tiny_models
 
-    from pimann.generate import generate_file
-    from pimann.rollouts import run_rollouts
-    from pimann.trajectory import read_trajectory
+    from pimann.core.trajectory import read_trajectory
+    from pimann.generate.generator import generate_file
+    from pimann.generate.rollouts import run_rollouts
 
     params = load_params()
     params = dataclasses.replace(

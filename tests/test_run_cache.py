@@ -19,9 +19,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pimann.features import build_dataset, write_dataset
-from pimann.params import load_params
-from pimann.paths import shared_dir
+from pimann.core.params import load_params
+from pimann.core.paths import shared_dir
+from pimann.learn.features import build_dataset, write_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))  # test_features' synthetic clips

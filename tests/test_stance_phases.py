@@ -1,5 +1,6 @@
-"""Where in a stance the feet slide (pimann.stance_phases): labels worked out by hand, shares
-of known sums, and the columns pimann.metrics and pimann.data_reference report."""
+"""Where in a stance the feet slide (pimann.evaluate.stance_phases): labels worked out by hand,
+shares
+of known sums, and the columns pimann.evaluate.metrics and pimann.evaluate.data_reference report."""
 
 from __future__ import annotations
 
@@ -8,10 +9,10 @@ import pytest
 from conftest import EVALUATE_PARAMS
 from test_data_reference import walking_clip
 
-from pimann.data_reference import clip_reference
-from pimann.metrics import trajectory_metrics
-from pimann.robot import load_robot
-from pimann.stance_phases import PHASES, phase_shares, stance_phases
+from pimann.core.robot import load_robot
+from pimann.evaluate.data_reference import clip_reference
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.evaluate.stance_phases import PHASES, phase_shares, stance_phases
 
 # one foot: a stance under way at the start (frames 0-2), one seen whole (5-11), one still on
 # at the end (13-14); edge 2: two frames each side

@@ -6,8 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.rotations import yaw_of
-from pimann.steering import (
+from pimann.core.rotations import yaw_of
+from pimann.generate.steering import (
     goal_from_command,
     hat,
     reached_goal,

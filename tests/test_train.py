@@ -15,15 +15,15 @@ import pytest
 import torch
 from test_features import break_features, synthetic_collection
 
-from pimann.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
-from pimann.errors import PimannError
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import build_dataset, write_dataset
-from pimann.mann import MANN
-from pimann.model_files import load_model, save_model
-from pimann.params import ModelParams, load_params
-from pimann.train import train_models
-from pimann.training_loss import TrainingLoss
+from pimann.core.errors import PimannError
+from pimann.core.params import ModelParams, load_params
+from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.features import build_dataset, write_dataset
+from pimann.learn.mann import MANN
+from pimann.learn.model_files import load_model, save_model
+from pimann.learn.train import train_models
+from pimann.learn.training_loss import TrainingLoss
 
 SMALL_MODEL = ModelParams(
     n_experts=2, gating_hidden=8, gating_layers=3, prediction_hidden=32, prediction_layers=3,
@@ -115,7 +115,7 @@ def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
 
 def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
     """data_contacts trains on the data's flags, differs from lower_sole, and needs them."""
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     contacts = dataclasses.replace(
         params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
@@ -136,7 +136,7 @@ def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
 
 
 def test_pi_term_enters_the_gradient(params, dataset_path):
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -292,7 +292,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
     """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs only with `both`
     or `base`, the joint velocity outputs unless `base`, the configuration (base pose, joints)
     unless `base` or `joint_velocities`; the loss's value is the same."""
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
@@ -317,7 +317,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
 def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_path):
     """pi_dropout false: L_B is the dropout-free prediction's (the eval-mode network's), L_D
     keeps its dropout; the training then differs from the paper's and stays deterministic."""
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -347,7 +347,7 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
 
 
 def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(dataset_path):
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     layout = read_dataset(dataset_path).layout
     mask = layout.fed_back_columns()
@@ -363,7 +363,7 @@ def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(datase
 def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_path):
     """Each member's noise comes from its own seed and epoch: alike in any group, new each
     epoch; nothing where the std is 0 (the paper)."""
-    from pimann.features import read_dataset
+    from pimann.learn.features import read_dataset
 
     data = read_dataset(dataset_path)
     columns = data.layout.fed_back_columns()
@@ -427,8 +427,8 @@ BF16_LOSS_RTOL = 0.01
 
 
 def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
-    from pimann.features import read_dataset
-    from pimann.train import autocast
+    from pimann.learn.features import read_dataset
+    from pimann.learn.train import autocast
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
@@ -451,7 +451,7 @@ def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
 
 
 def test_precision_auto_follows_the_cpu_flags(tmp_path):
-    from pimann.train import cpu_has_bf16, pick_precision
+    from pimann.learn.train import cpu_has_bf16, pick_precision
 
     with_bf16, without = tmp_path / "with", tmp_path / "without"
     with_bf16.write_text("processor : 0\nflags : fpu sse2 avx512f avx512_bf16 amx_tile\n")
