@@ -22,9 +22,9 @@ from test_generate import GaitModel, roll
 from pimann.core.params import MotionSegment, StandSegment, load_params
 from pimann.evaluate import command_following as cf
 from pimann.evaluate.command_following_figure import fig_command_following
+from pimann.evaluate.figure_style import style
 from pimann.evaluate.following import summary_table
 from pimann.generate.clip_commands import clip_commands, segment_class
-from pimann.report.figures import style
 
 DT = 1.0 / RATE
 

@@ -21,12 +21,12 @@ from pimann.evaluate.command_following import summarise_following
 from pimann.evaluate.evaluation import (
     evaluate_all,
     provenance,
-    read_metrics,
     representative_seed,
     summarise,
     write_results,
 )
 from pimann.evaluate.metrics import trajectory_metrics
+from pimann.evaluate.results import read_metrics
 from pimann.generate.rollout_layout import BASELINE, read_script, select_rows
 from pimann.generate.rollouts import run_rollouts
 from pimann.report.key_metrics import following_metrics

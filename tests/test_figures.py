@@ -15,8 +15,10 @@ from test_claims import REFERENCE, crafted_metrics
 from pimann.core.params import load_params
 from pimann.core.robot import JOINT_NAMES
 from pimann.evaluate.evaluation import provenance, write_results
+from pimann.evaluate.figure_style import save_figure
+from pimann.evaluate.results import load_results
 from pimann.generate.rollout_layout import RolloutKey
-from pimann.report.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
+from pimann.report.figures import FIGURES, fig_foot_heights, make_figures
 
 
 @pytest.fixture(scope="module")

@@ -20,7 +20,8 @@ from matplotlib.patches import Patch
 
 from pimann.core.params import FiguresParams
 from pimann.evaluate.command_following import SPEED_TOLERANCE
-from pimann.generate.rollout_layout import HELD_OUT
+from pimann.evaluate.figure_style import BASELINE_COLOUR, weight_colours
+from pimann.generate.rollout_layout import BASELINE, HELD_OUT, weight_label
 from pimann.learn.motion_classes import CLASSES
 
 PLOTTED_CLASSES = tuple(c for c in CLASSES if c not in ("turning_in_place", "standing"))
@@ -31,9 +32,6 @@ BAND_COLOUR = "0.85"  # the +-25% speed criterion behind the bars
 def _models(summary: pd.DataFrame) -> dict[str, tuple[str, object]]:
     """{model: (label, colour)}: the baseline first in grey, then PI models by weight (viridis,
     as every other figure), else in the table's order."""
-    # lazily: pimann.report.figures imports the evaluation, which may come to import this module
-    from pimann.report.figures import BASELINE, BASELINE_COLOUR, weight_colours, weight_label
-
     names = list(dict.fromkeys(summary["model"]))
     weights: dict[str, float] = {}
     if "pi_weight" in summary:
@@ -59,7 +57,7 @@ def _models(summary: pd.DataFrame) -> dict[str, tuple[str, object]]:
 def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figure | None:
     """Commanded vs achieved speed per class and model, steered and not (None: nothing to plot).
 
-    Draw it inside `matplotlib.rc_context(pimann.report.figures.style(figures))` as the other
+    Draw it inside `matplotlib.rc_context(pimann.evaluate.figure_style.style(figures))` as the other
     figures.
     """
     table = summary[summary["class"].isin(PLOTTED_CLASSES)]

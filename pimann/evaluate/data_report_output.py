@@ -25,8 +25,8 @@ from pimann.evaluate.data_report import (
     RULES,
     TOTAL,
 )
+from pimann.evaluate.figure_style import BASELINE_COLOUR, style
 from pimann.learn.motion_classes import CLASSES, WINDOW_S
-from pimann.report.figures import BASELINE_COLOUR, style
 
 
 def _cell(value: float | None, digits: int = 1) -> str:

@@ -25,7 +25,6 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.atomic import atomic_path, write_text_atomic
-from pimann.core.errors import PimannError
 from pimann.core.parallel import pool_map
 from pimann.core.params import FiguresParams, Params, as_dict
 from pimann.core.paths import REPO_ROOT
@@ -52,7 +51,6 @@ from pimann.generate.rollout_layout import (
 
 log = logging.getLogger(__name__)
 
-KEY_COLUMNS = ["model", "variant", "pi_weight", "seed", "scenario", "steering"]
 # the metrics summarised over seeds in metrics_summary.json (metrics.csv keeps every one)
 SUMMARY_METRICS = [
     "support_rmse_linear_total",
@@ -274,19 +272,6 @@ def write_results(
     markdown = claims_markdown(claims, info, data_reference)
     write_text_atomic(results_dir / "claims.md", markdown)
     return claims
-
-
-def read_metrics(path: str | Path) -> pd.DataFrame:
-    """metrics.csv back into a frame."""
-    path = Path(path)
-    if not path.is_file():
-        raise PimannError(path, "file not found (run `dvc repro evaluate`)")
-    frame = pd.read_csv(path)
-    missing = [c for c in KEY_COLUMNS if c not in frame]
-    if missing:
-        raise PimannError(path, f"lacks column {missing[0]!r}")
-    frame["steering"] = frame["steering"].astype(str).str.lower() == "true"
-    return frame
 
 
 def evaluate_all(

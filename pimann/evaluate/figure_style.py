@@ -1,26 +1,21 @@
-"""What every figure shares: the style, the colours, the results they read, saving.
+"""What every figure shares: the style, the colours, the footer, saving.
 
-Split from pimann.report.figures so that the figure functions stay readable; pimann.report.figures
-re-exports these names for the modules that import them from there.
+Plotting alone, reading no results: the evaluate stage draws command_following.png and the
+data report its figure with it, and the report's figures (pimann.report.figures) the rest.
 """
 
 from __future__ import annotations
 
-import dataclasses
 import json
 from pathlib import Path
 from typing import Any
 
 import matplotlib
 import numpy as np
-import pandas as pd
 from matplotlib.figure import Figure
 
 from pimann.core.atomic import atomic_path
-from pimann.core.errors import PimannError
 from pimann.core.params import FiguresParams
-from pimann.evaluate.evaluation import read_metrics
-from pimann.generate.rollout_layout import pi_models
 
 FORMATS = ("pdf", "png")
 BASELINE_COLOUR = "0.45"
@@ -59,55 +54,6 @@ def weight_colours(weights) -> dict[float, tuple]:
     cmap = matplotlib.colormaps["viridis"]
     positions = np.linspace(0.0, 0.85, max(len(ordered), 2))
     return {w: cmap(p) for w, p in zip(ordered, positions, strict=False)}
-
-
-@dataclasses.dataclass
-class Results:
-    """What the figures read: the evaluate stage's outputs (and the simulate stage's, if any)."""
-
-    root: Path
-    metrics: pd.DataFrame
-    summary: dict[str, Any]
-    timeseries: dict[str, pd.DataFrame]
-
-    @property
-    def provenance(self) -> dict[str, Any]:
-        return self.summary.get("provenance", {})
-
-    @property
-    def weights(self) -> list[float]:
-        """Every PI weight of the study (for colours), from the provenance or the data."""
-        listed = self.provenance.get("pi_weights") or []
-        return sorted({float(w) for w in listed} | set(pi_models(self.metrics)))
-
-    def data_level(self, metric: str) -> float | None:
-        """The retargeted data's own level of a sliding metric (median over all clips)."""
-        subset = self.summary.get("data_reference", {}).get("all") or {}
-        return (subset.get("metrics", {}).get(metric) or {}).get("median")
-
-    def model_weight(self, series: str) -> float | None:
-        """The PI weight of the rollout a time series came from."""
-        model = self.summary.get("timeseries", {}).get(series, {}).get("model")
-        rows = self.metrics[self.metrics["model"] == model]
-        return float(rows["pi_weight"].iloc[0]) if len(rows) else None
-
-
-def load_results(results_dir: str | Path) -> Results:
-    root = Path(results_dir)
-    summary_path = root / "metrics_summary.json"
-    try:
-        summary = json.loads(summary_path.read_text())
-    except FileNotFoundError:
-        raise PimannError(summary_path, "file not found (run `dvc repro evaluate`)") from None
-    except json.JSONDecodeError as error:
-        raise PimannError(summary_path, f"not valid JSON ({error})") from None
-    timeseries = {}
-    for path in sorted((root / "timeseries").glob("*.csv")):
-        table = pd.read_csv(path)
-        if "time" not in table:
-            raise PimannError(path, "lacks column 'time'")
-        timeseries[path.stem] = table
-    return Results(root, read_metrics(root / "metrics.csv"), summary, timeseries)
 
 
 def footer(fig: Figure, provenance: dict[str, Any]) -> None:

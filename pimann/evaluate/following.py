@@ -339,7 +339,7 @@ def write_following(
     import matplotlib
 
     from pimann.evaluate.command_following_figure import fig_command_following
-    from pimann.report.figures import save_figure, style
+    from pimann.evaluate.figure_style import save_figure, style
 
     results_dir = Path(results_dir)
     with atomic_path(results_dir / f"{NAME}.csv") as tmp:

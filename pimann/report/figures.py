@@ -29,20 +29,13 @@ from pimann.core.robot import JOINT_NAMES
 from pimann.evaluate.figure_style import (
     BASELINE_COLOUR,
     DATA_COLOUR,
-    FORMATS,
-    Results,
-    load_results,
     new_figure,
     save_figure,
     style,
     weight_colours,
 )
+from pimann.evaluate.results import Results, load_results
 from pimann.generate.rollout_layout import BASELINE, pi_models, weight_label
-
-__all__ = [
-    "BASELINE", "BASELINE_COLOUR", "DATA_COLOUR", "FIGURES", "FORMATS", "Results",
-    "load_results", "make_figures", "save_figure", "style", "weight_colours", "weight_label",
-]  # fmt: skip
 
 log = logging.getLogger(__name__)
 CONDITIONS = {  # drift figures: (title, colour, line style)

@@ -148,7 +148,7 @@ def sim_metrics(sim_summary: dict[str, Any] | None) -> dict[str, Number]:
 def key_metrics(results_dir: str | Path, params: Params) -> dict[str, Number]:
     """Every key number of module docstring from the files under `results_dir` (the parts
     whose file is missing are left out)."""
-    from pimann.evaluate.evaluation import read_metrics
+    from pimann.evaluate.results import read_metrics
 
     root = Path(results_dir)
     frame = read_metrics(root / "metrics.csv")
