@@ -43,16 +43,14 @@ from pimann.evaluate.claim_rules import (
     stands_still,
     velocity_level_cause,
 )
-from pimann.evaluate.metrics import WALK_TOUCHDOWNS
+from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
 from pimann.generate.rollout_layout import BASELINE, weight_label
 
 __all__ = [
-    "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "PAPER_BASELINE_RMSE", "POSITION",
+    "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "POSITION",
     "REFERENCE", "RULES", "STANDS_STILL", "VELOCITY", "WITHIN_SPREAD", "Claim",
     "claims_markdown", "data_claim", "evaluate_claims",
 ]  # fmt: skip
-
-PAPER_BASELINE_RMSE = {"linear": 22.88, "angular": 17.74}
 
 
 def evaluate_claims(

@@ -49,8 +49,7 @@ from pimann.core.parallel import pool_map
 from pimann.core.params import Params, as_dict
 from pimann.core.robot import SOLE_CORNERS, corner_offsets, load_robot
 from pimann.core.trajectory import Trajectory, iter_collection
-from pimann.evaluate.claims import PAPER_BASELINE_RMSE
-from pimann.evaluate.metrics import analyse
+from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, analyse
 from pimann.learn.feature_layout import window_layout
 from pimann.learn.features import clip_features, settled_contacts
 from pimann.learn.motion_classes import (

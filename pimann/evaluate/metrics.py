@@ -59,6 +59,8 @@ from pimann.evaluate.stance_phases import SHARE_METRICS, phase_share_metrics
 from pimann.evaluate.support_velocity import support_foot_velocities
 
 SIDES = ("left", "right")
+# the paper's baseline sliding RMSE (linear, angular): the claims and the data report compare
+PAPER_BASELINE_RMSE = {"linear": 22.88, "angular": 17.74}
 WALK_TOUCHDOWNS = 2  # a rollout walks on steps: a glide of walk_distance without them does not
 FOOT_VELOCITY_FRAMES = {
     "local_world_aligned": pin.LOCAL_WORLD_ALIGNED,  # the paper's text

@@ -18,34 +18,6 @@ import numpy as np
 
 from pimann.core.rotations import yaw_of
 
-_EYE = np.eye(3)
-
-
-def skew_part(matrices: np.ndarray) -> np.ndarray:
-    """(A - A^T) / 2 over the last two axes."""
-    matrices = np.asarray(matrices, dtype=float)
-    return 0.5 * (matrices - np.swapaxes(matrices, -1, -2))
-
-
-def vee(skew: np.ndarray) -> np.ndarray:
-    """The vector w of a skew-symmetric [w]x, over the last two axes."""
-    skew = np.asarray(skew, dtype=float)
-    return np.stack([skew[..., 2, 1], skew[..., 0, 2], skew[..., 1, 0]], axis=-1)
-
-
-def hat(vectors: np.ndarray) -> np.ndarray:
-    """[w]x, the skew-symmetric matrix of w (..., 3) -> (..., 3, 3)."""
-    w = np.asarray(vectors, dtype=float)
-    zero = np.zeros_like(w[..., 0])
-    return np.stack(
-        [
-            np.stack([zero, -w[..., 2], w[..., 1]], -1),
-            np.stack([w[..., 2], zero, -w[..., 0]], -1),
-            np.stack([-w[..., 1], w[..., 0], zero], -1),
-        ],
-        axis=-2,
-    )
-
 
 def steer(
     v_hat: np.ndarray,
@@ -85,24 +57,6 @@ def steer(
     return np.asarray(v_hat) - k0 * linear, np.asarray(omega_hat) - (0.5 * k1) * angular
 
 
-def rotation_rpy(
-    roll: float | np.ndarray = 0.0, pitch: float | np.ndarray = 0.0, yaw: float | np.ndarray = 0.0
-) -> np.ndarray:
-    """R = Rz(yaw) Ry(pitch) Rx(roll): e.g. a desired orientation from a commanded heading.
-
-    Angles broadcast: (...) -> (..., 3, 3), so a batch of rollouts gets its rotations at once.
-    """
-    angles = (np.asarray(a, dtype=float) for a in (roll, pitch, yaw))
-    roll, pitch, yaw = np.broadcast_arrays(*angles)
-    cr, sr, cp, sp, cy, sy = (f(a) for a in (roll, pitch, yaw) for f in (np.cos, np.sin))
-    rows = (
-        (cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr),
-        (sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr),
-        (-sp, cp * sr, cp * cr),
-    )
-    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
-
-
 def goal_from_command(
     p: np.ndarray, R: np.ndarray, command_displacement: np.ndarray, factor: float = 2.5
 ) -> np.ndarray:
@@ -125,24 +79,3 @@ def reached_goal(p: np.ndarray, p_goal: np.ndarray, radius: float = 0.3) -> np.n
     )
     result = distance <= radius
     return bool(result) if np.ndim(result) == 0 else result
-
-
-def roll_pitch(rotation: np.ndarray) -> np.ndarray:
-    """(B, 2) roll and pitch of rotations (B, 3, 3), as pimann.learn.features.matrix_to_rpy: the
-    inverse of `rotation_rpy` but for yaw (generation's stop blend and fed-back pose)."""
-    roll = np.arctan2(rotation[:, 2, 1], rotation[:, 2, 2])
-    pitch = np.arctan2(-rotation[:, 2, 0], np.hypot(rotation[:, 0, 0], rotation[:, 1, 0]))
-    return np.stack([roll, pitch], axis=1)
-
-
-def exp_so3(omega: np.ndarray) -> np.ndarray:
-    """exp([w]x) of rotation vectors (B, 3): I + (sin t / t) [w]x + ((1 - cos t) / t^2) [w]x^2,
-    t = |w|, the second factor as (sin(t/2) / (t/2))^2 / 2; 1e-300 added to t keeps t = 0 exact.
-    Generation integrates the base orientation of every rollout of a batch with it."""
-    theta = np.sqrt((omega * omega).sum(axis=1)) + 1e-300
-    half = 0.5 * theta
-    a, b = np.sin(theta) / theta, np.sin(half) / half
-    skew = np.zeros((len(omega), 9))  # [w]x, row-major
-    skew[:, [7, 2, 3]], skew[:, [5, 6, 1]] = omega, -omega
-    skew = skew.reshape(-1, 3, 3)
-    return _EYE + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)

@@ -21,8 +21,8 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from pimann.core.robot import STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
+from pimann.core.rotations import roll_pitch
 from pimann.core.trajectory import Trajectory
-from pimann.generate.steering import roll_pitch
 from pimann.learn.motion_classes import CLASSES, motion_classes
 
 log = logging.getLogger(__name__)
