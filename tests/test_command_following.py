@@ -19,6 +19,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from test_data_report import RATE, make_trajectory
 from test_generate import GaitModel, roll
 
+from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, StandSegment, load_params
 from pimann.evaluate import command_following as cf
 from pimann.evaluate.command_following_figure import fig_command_following
@@ -211,7 +212,7 @@ def test_drift_is_last_window_minus_first():
 def test_touchdowns_and_alternation_on_synthetic_contacts():
     phase = np.arange(200) % 50  # 1 s gait: left down 0-29, right down 25-49 and 0-4
     contacts = np.column_stack([phase < 30, (phase >= 25) | (phase < 5)])
-    counts = cf.touchdowns(contacts)
+    counts = touchdowns(contacts)
     assert counts.tolist() == [3, 4]  # the left starts down; the right touches down each cycle
     assert cf.feet_alternate(counts, moving=True)
     assert not cf.feet_alternate([4, 1], moving=True)  # one foot steps, the other drags
@@ -223,10 +224,10 @@ def test_touchdowns_and_alternation_on_synthetic_contacts():
     assert not cf.feet_alternate([0, 1], True, 2 * cf.STRIDE_S)
     assert not cf.feet_alternate([0, 0], True, 1.0)  # but it steps
     assert not cf.feet_alternate([2, 0], True, 1.0)
-    shares = [cf.touchdowns(contacts[k : k + 40]) for k in range(0, 160, 5)]
+    shares = [touchdowns(contacts[k : k + 40]) for k in range(0, 160, 5)]
     assert all(cf.feet_alternate(c, True, 0.8) for c in shares)
     assert not all(min(c) >= 1 for c in shares)  # the stricter rule fails the gait itself
-    assert cf.touchdowns(np.ones((10, 2), bool)).tolist() == [0, 0]
+    assert touchdowns(np.ones((10, 2), bool)).tolist() == [0, 0]
 
 
 def test_a_stepping_gait_alternates_and_stands(robot):

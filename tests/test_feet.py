@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pimann.core.intervals import true_runs
+from pimann.core.contacts import true_runs
 from pimann.core.params import load_params
 from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion

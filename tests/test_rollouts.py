@@ -29,7 +29,6 @@ from pimann.generate.rollout_layout import (
     RolloutKey,
     clip_scenario,
     find_rollouts,
-    model_seeds,
     parse_rollout_path,
     pi_models,
     read_script,
@@ -41,6 +40,7 @@ from pimann.generate.rollout_layout import (
     weight_label,
 )
 from pimann.generate.rollouts import models_record, rollout_scripts
+from pimann.learn.model_files import model_seeds
 
 EVALUATION = (
     "pimann.evaluate.evaluation",

@@ -12,6 +12,10 @@ switch happens at the first sample at which the condition has held continuously 
 at least `switch_time` earlier; at 50 Hz and 0.04 s that is the third consecutive sample
 satisfying it (samples k, k+1, k+2 -> switch at k+2). Unlike that code, the timer restarts
 whenever the condition breaks.
+
+Here too the runs of True in a flag sequence (`true_runs`: contacts, swings, double support,
+standing pauses), which the retargeting, the clip cutter and the simulation's footstep plan
+read, and the touchdowns of contact flags.
 """
 
 from __future__ import annotations
@@ -211,3 +215,18 @@ def detect_contacts(
     """(T, 2) bool contacts (left, right) of a trajectory, by the Schmitt trigger above."""
     kinematics = foot_kinematics(robot, trajectory_configurations(robot, trajectory))
     return contacts_from_heights(kinematics.heights, frame_period(trajectory), params)
+
+
+def true_runs(flags: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) pairs of the maximal runs of True in a 1-D bool array, in order."""
+    flags = np.asarray(flags, dtype=bool)
+    if flags.ndim != 1:
+        raise ValueError(f"flags must be 1-D, not of shape {flags.shape}")
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], flags.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
+
+
+def touchdowns(contacts: np.ndarray) -> np.ndarray:
+    """(2,) touchdowns (a foot's contact switching on) per foot over (T, 2) contact flags."""
+    contacts = np.asarray(contacts, dtype=bool)
+    return np.sum(~contacts[:-1] & contacts[1:], axis=0)

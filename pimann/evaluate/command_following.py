@@ -44,7 +44,7 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
-from pimann.core.contacts import frame_period
+from pimann.core.contacts import frame_period, touchdowns
 from pimann.core.errors import PimannError
 from pimann.core.params import EvaluateParams, Segment, StandSegment
 from pimann.core.robot import Robot
@@ -76,12 +76,6 @@ SIDES = ("left", "right")
 
 
 # ----------------------------------------------------------------------------- measures
-
-
-def touchdowns(contacts: np.ndarray) -> np.ndarray:
-    """(2,) touchdowns (a foot's contact switching on) per foot over (T, 2) contact flags."""
-    contacts = np.asarray(contacts, dtype=bool)
-    return np.sum(~contacts[:-1] & contacts[1:], axis=0)
 
 
 def feet_alternate(counts: Sequence[int], moving: bool, duration_s: float = math.inf) -> bool:

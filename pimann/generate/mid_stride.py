@@ -33,13 +33,13 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.rotations import roll_pitch, yaw_of
 from pimann.core.trajectory import Trajectory
-from pimann.evaluate.command_following import touchdowns
 from pimann.generate.benchmark_clips import held_out_clips
-from pimann.generate.rollout_layout import model_seeds
+from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import CLASSES, base_motion, classify
 from pimann.learn.standing import StandingPose
 from pimann.learn.teacher_forcing import LEG_JOINTS as LEGS

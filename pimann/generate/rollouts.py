@@ -26,10 +26,10 @@ from pimann.generate.rollout_layout import (
     MODELS_FILE,
     RolloutKey,
     Segment,
-    model_seeds,
     rollout_path,
     scenario_names,
 )
+from pimann.learn.model_files import model_seeds
 
 log = logging.getLogger(__name__)
 

@@ -31,17 +31,17 @@ import pandas as pd
 import torch
 from scipy.spatial.transform import Rotation
 
+from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory
-from pimann.evaluate.command_following import touchdowns
 from pimann.generate.batch_generate import BatchGenerator, data_start
 from pimann.generate.benchmark_clips import held_out_clips, training_clips
 from pimann.generate.command_script import ScriptSteps
 from pimann.generate.mid_stride import ratio_along
-from pimann.generate.rollout_layout import model_seeds
 from pimann.learn.features import clip_features
+from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import base_motion, class_counts, majority_class
 from pimann.learn.standing import StandingPose
 from pimann.learn.teacher_forcing import LEG_JOINTS as LEGS

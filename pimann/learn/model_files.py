@@ -136,3 +136,17 @@ def load_model(
     if (normalisation.x_std <= 0).any() or (normalisation.y_std <= 0).any():
         raise PimannError(path, "stats x_std or y_std hold values <= 0")
     return model, layout, normalisation, meta
+
+
+def model_seeds(models_dir: str | Path) -> dict[int, Path]:
+    """{seed: folder} of the trained models in a training output (`<seed>/meta.json`)."""
+    models_dir = Path(models_dir)
+    seeds: dict[int, Path] = {}
+    for folder in (p.parent for p in models_dir.glob("*/meta.json")):
+        try:
+            seeds[int(folder.name)] = folder
+        except ValueError:
+            raise PimannError(folder, "not a seed: a model folder is named by its seed") from None
+    if not seeds:
+        raise PimannError(models_dir, "holds no trained model (<seed>/meta.json)")
+    return dict(sorted(seeds.items()))

@@ -18,8 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pimann.core.contacts import true_runs
 from pimann.core.errors import PimannError
-from pimann.core.intervals import true_runs
 from pimann.core.params import DataParams, SkeletonParams, SourceParams
 from pimann.core.paths import bandai_label_files, resolve_shared, shared_glob
 from pimann.mocap.bvh import read_bvh

@@ -28,7 +28,7 @@ import dataclasses
 
 import numpy as np
 
-from pimann.core.intervals import true_runs
+from pimann.core.contacts import true_runs
 from pimann.core.params import RetargetParams
 from pimann.core.robot import SEGMENTS
 from pimann.core.rotations import yaw_of

@@ -14,8 +14,8 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 
+from pimann.core.contacts import true_runs
 from pimann.core.errors import PimannError
-from pimann.core.intervals import true_runs
 from pimann.core.params import SimulateParams
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, Robot
 from pimann.core.rotations import rot_z

@@ -7,7 +7,7 @@ import itertools
 import numpy as np
 import pytest
 
-from pimann.core.intervals import true_runs
+from pimann.core.contacts import true_runs
 
 
 def _loop_runs(flags: list[bool]) -> list[tuple[int, int]]:
