@@ -368,3 +368,30 @@ def test_trainings_list_every_train_setting_that_changes_a_model(name):
     wanted = {f"train.{f.name}" for f in dataclasses.fields(TrainParams)}
     wanted -= {f"train.{key}" for key in TRAIN_NOT_RESULT}
     assert not wanted - listed, f"{name}: params not listed in dvc.yaml: {sorted(wanted - listed)}"
+
+
+def _stages_listing(module: str) -> set[str]:
+    """The stages a code edit of `module` reruns directly (its deps cover the file)."""
+    params = _params()
+    return {
+        name
+        for name, stage in _dvc_stages().items()
+        if any(_covers(_interpolate(_dep_path(dep), params), module) for dep in stage["deps"])
+    }
+
+
+def test_editing_the_steering_law_reruns_the_rollouts_and_no_training():
+    """The steering law acts at generation (paper Sec. IV): its rollouts rerun, and what reads
+    them after, but never the features or a training, which lie upstream."""
+    reruns = _stages_listing("pimann/generate/steering.py")
+    assert {"rollout", "rollout_baseline"} <= reruns
+    assert not reruns & {"retarget", "data_report", "features", "train", "train_baseline"}
+
+
+def test_rewording_a_claim_reruns_the_evaluation_onward_only():
+    """The claims are judged by the evaluate stage; the data report, generation and the
+    trainings never import them."""
+    for module in ("pimann/evaluate/claims.py", "pimann/evaluate/claim_rules.py"):
+        reruns = _stages_listing(module)
+        assert "evaluate" in reruns, module
+        assert reruns <= {"evaluate", "figures", "report"}, f"{module} reruns {sorted(reruns)}"
