@@ -70,7 +70,7 @@ def _read_trajectory(args: argparse.Namespace):
 
 
 def cmd_render(args: argparse.Namespace) -> None:
-    from pimann.render.trajectory import render_file
+    from pimann.render.beside_mocap import render_file
 
     _read_trajectory(args)  # bad input named by its file before any drawing
     skeleton = _skeleton(args) if args.mocap else None

@@ -17,12 +17,12 @@ from pimann.core.robot import (
 )
 from pimann.core.trajectory import Trajectory, write_trajectory
 from pimann.mocap.human_motion import HumanMotion
+from pimann.render.beside_mocap import render_file
 from pimann.render.trajectory import (
     LEFT_COLOUR,
     RIGHT_COLOUR,
     human_skeleton,
     match_frames,
-    render_file,
     render_trajectory,
     robot_skeleton,
 )

@@ -9,31 +9,44 @@ Drawing is a hand-made orthographic projection onto plain 2-D matplotlib axes ra
 mplot3d: a stick figure needs no hidden-surface removal beyond drawing far bones first, and
 reusing one Agg figure whose artists are only updated keeps a frame at a few milliseconds
 (pimann.render.scene). Files: pimann.render.picture_files (strips wrap into rows of four).
+Reading the person from a mocap file: pimann.render.beside_mocap.
 """
 
 from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Protocol
 
 import numpy as np
 import pinocchio as pin
 
 from pimann.core.contacts import detect_contacts, trajectory_configurations
 from pimann.core.errors import PimannError
-from pimann.core.params import SkeletonParams
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot, load_robot
-from pimann.core.trajectory import Trajectory, read_trajectory
-from pimann.mocap.human_motion import HumanMotion
-from pimann.mocap.mirror import mirror_human
+from pimann.core.trajectory import Trajectory
 from pimann.render.picture_files import FORMATS, STRIP_COLUMNS, check_output, write_pictures
 from pimann.render.scene import CENTRE_COLOUR, LEFT_COLOUR, RIGHT_COLOUR, Scene, Skeleton
 
 log = logging.getLogger(__name__)
 
+
+class DrawnPerson(Protocol):
+    """What drawing a person reads of pimann.mocap.human_motion.HumanMotion; named here, not
+    imported, so that the simulation's videos (pimann.sim.video) draw without the mocap readers
+    (and the simulate stage does not rerun when they change)."""
+
+    time: np.ndarray
+    source: str
+    segment_positions: np.ndarray
+    orientations: np.ndarray
+    pelvis_position: np.ndarray
+    mirrored: bool
+
+
 __all__ = [
     "FORMATS", "LEFT_COLOUR", "RIGHT_COLOUR", "STRIP_FRAMES", "Skeleton", "check_output",
-    "human_skeleton", "match_frames", "render_file", "render_trajectory", "robot_skeleton",
+    "human_skeleton", "match_frames", "render_trajectory", "robot_skeleton",
     "strip_frame_indices", "write_pictures",
 ]  # fmt: skip
 
@@ -131,7 +144,7 @@ def robot_skeleton(
     )
 
 
-def human_skeleton(human: HumanMotion, frames: np.ndarray) -> Skeleton:
+def human_skeleton(human: DrawnPerson, frames: np.ndarray) -> Skeleton:
     """The person's segment origins plus head top, hands and toes at `frames`."""
     positions = human.segment_positions[frames]
     seg = {name: k for k, name in enumerate(SEGMENTS)}
@@ -190,7 +203,7 @@ def clip_rate(clock: np.ndarray) -> float:
 def render_trajectory(
     trajectory: Trajectory | None,
     output_path: str | Path,
-    human: HumanMotion | None = None,
+    human: DrawnPerson | None = None,
     *,
     fps: float | None = None,
     frame_rate: float | None = None,
@@ -245,26 +258,3 @@ def render_trajectory(
     pictures = scene.frames(len(frames), output_path.name)
     write_pictures(output_path, pictures, fps, strip_columns)
     return output_path
-
-
-def render_file(
-    trajectory_path: str | Path,
-    output_path: str | Path,
-    group: str | None = None,
-    mocap_path: str | Path | None = None,
-    skeleton: SkeletonParams | None = None,
-    **options,
-) -> Path:
-    """`pimann render`: a trajectory file (one group of a collection), optionally beside the
-    mocap clip it came from (read with `skeleton`, default: recognised from its joints), to a
-    picture. A mirrored trajectory gets the mirrored person. `options` go to
-    `render_trajectory`."""
-    trajectory = read_trajectory(trajectory_path, group)
-    human = None
-    if mocap_path is not None:
-        from pimann.mocap.io import read_mocap
-
-        human = read_mocap(mocap_path, skeleton)
-        if bool(trajectory.attrs.get("mirrored", False)) != human.mirrored:
-            human = mirror_human(human)
-    return render_trajectory(trajectory, output_path, human, **options)
