@@ -5,22 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pimann.core.params import EvaluateParams, SimulateParams, load_params
+from pimann.core.params import SimulateParams, load_params
 from pimann.core.robot import Robot, load_robot
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
-
-# The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
-EVALUATE_PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
-    skating_height=0.05,
-    skating_speed_per_frame=0.025,
-    skating_rate_hz=20.0,
-    walk_distance=1.0,
-    foot_velocity_frame="local_world_aligned",
-)
 
 
 @pytest.fixture(scope="session")
@@ -48,13 +36,6 @@ def stance(sim_robot, sim_params) -> tuple[np.ndarray, np.ndarray]:
 @pytest.fixture
 def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
-
-
-def random_configuration(robot: Robot, rng: np.random.Generator) -> np.ndarray:
-    """A configuration with a random base pose and joints inside their limits."""
-    joints = rng.uniform(robot.joint_lower, robot.joint_upper)
-    quaternion = rng.normal(size=4)
-    return robot.configuration(rng.normal(size=3), quaternion, joints)
 
 
 REAL_WALK = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"

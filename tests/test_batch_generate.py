@@ -12,7 +12,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from test_generate import IDENTITY, LAYOUT, GaitModel
+from builders import IDENTITY, LAYOUT, GaitModel
 
 from pimann.core.contacts import FEET
 from pimann.core.params import ModelParams, MotionSegment, StandSegment

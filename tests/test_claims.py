@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import re
 
-import pandas as pd
 import pytest
+from builders import AGREEING, REFERENCE, crafted_metrics
 
 from pimann.core.params import load_params
 from pimann.evaluate.claim_rules import CONFIGURATION_HELD
@@ -24,62 +24,7 @@ from pimann.evaluate.claims import (
 )
 from pimann.generate.rollout_layout import BASELINE
 
-WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
-# seed medians of a study that agrees with the paper
-AGREEING = {
-    "support_rmse_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9, "w100": 15},
-    "support_rmse_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5, "w100": 9},
-    "support_rmse_linear_world_total": {BASELINE: 24, "w0": 14, "w1": 12, "w10": 9, "w20": 10,
-                                        "w100": 17},
-    "support_rmse_linear_position_total": {BASELINE: 15, "w0": 9, "w1": 8, "w10": 6, "w20": 7,
-                                           "w100": 12},
-    "contact_sole_pitch_max_abs": {BASELINE: 0.1, "w0": 0.05, "w1": 0.06, "w10": 0.08,
-                                   "w20": 0.09, "w100": 0.3},
-    "contact_foot_speed_mean": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1, "w20": 0.1,
-                                "w100": 0.2},
-    "contact_foot_speed_mean_position": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1,
-                                         "w20": 0.1, "w100": 0.2},
-}  # fmt: skip
 ALL = [f"C{k}" for k in range(1, 15)]
-REFERENCE = {
-    "label": "data (retargeted, forward walking)", "frames": 500, "min_forward_frames": 250,
-    "joint_velocities": "differences",
-    "all": {"clips": 82, "used": 16, "metrics": {
-        "support_rmse_linear_total": {"median": 12.0},
-        "support_rmse_linear_world_total": {"median": 13.2},
-        "support_rmse_angular_total": {"median": 2.44},
-        "support_rmse_linear_position_total": {"median": 12.0},
-        "support_rmse_linear_position_world_total": {"median": 13.2},
-        "support_rmse_angular_position_total": {"median": 2.44},
-        "support_rmse_linear_position_liftoff_share": {"median": 0.31},
-        "contact_liftoff_frames_share": {"median": 0.18},
-    }},
-    "test": {"clips": 6, "used": 0, "metrics": {}},
-}  # fmt: skip
-
-
-def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFrame:
-    """metrics.csv rows: median over seeds = `values` (seed offsets -2..2 x 1 %)."""
-    rows = []
-    for model, weight in WEIGHTS.items():
-        for seed in seeds:
-            for steering in (False, True):
-                offset = 1.0 + 0.01 * (seed - 2)
-                row = {
-                    "model": model, "variant": "ground_projected" if model == BASELINE else "full",
-                    "pi_weight": weight, "seed": seed, "scenario": "forward",
-                    "steering": steering, "rollout": f"{model}/{seed}/forward.h5",
-                }  # fmt: skip
-                for metric, by_model in values.items():
-                    row[metric] = by_model[model] * offset
-                unsteered_pi = model != BASELINE and not steering
-                row["drift_y_max_abs"] = 0.8 if unsteered_pi else 0.3 if not steering else 0.05
-                row["drift_yaw_max_abs"] = 0.6 if unsteered_pi else 0.2 if not steering else 0.02
-                row["drift_y_max_abs"] *= offset
-                row["walks"] = not (model == "w100" and not steering)
-                row["skating_ratio"] = 0.1 * offset
-                rows.append(row)
-    return pd.DataFrame(rows)
 
 
 @pytest.fixture(scope="module")

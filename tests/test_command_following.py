@@ -14,10 +14,15 @@ import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import (
+    EVALUATE_PARAMS,
+    RATE,
+    GaitModel,
+    crafted_rows,  # noqa: F401
+    make_trajectory,
+    roll,
+)
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from test_data_report import RATE, make_trajectory
-from test_generate import GaitModel, roll
 
 from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, StandSegment, load_params
@@ -247,55 +252,6 @@ def test_a_stepping_gait_alternates_and_stands(robot):
 
 
 # ----------------------------------------------------------------------------- summary
-
-
-def crafted_rows() -> pd.DataFrame:
-    """Two models x two steering x three seeds: forward, turning in place and stand rows."""
-    rows = []
-    for model, weight in (("baseline", 0.0), ("w10", 10.0)):
-        for steering in (False, True):
-            for seed in range(3):
-                good = model == "w10" and steering
-                speed = 0.78 if good else 0.4 + 0.05 * seed
-                common = {"model": model, "pi_weight": weight, "steering": steering, "seed": seed}
-                for k in range(2):  # two forward segments per seed, averaged first
-                    rows.append({
-                        **common, "segment": k, "class": "forward", "stand": False,
-                        "cmd_speed": 0.8, "speed_along": speed + 0.02 * k,
-                        "speed_ratio": (speed + 0.02 * k) / 0.8, "cmd_yaw_rate": 0.0,
-                        "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                        "heading_error_max_deg": 3.0 if good else 12.0 + seed,
-                        "heading_error_final_deg": -3.0 if good else 12.0,
-                        "alternates": good or seed == 0, "sliding_linear": 10.0 + seed,
-                        "sliding_linear_position": 6.0 + seed,
-                        "sliding_angular": 5.0, "base_travel_m": np.nan,
-                        "base_travel_limit_m": np.nan, "foot_speed_max": np.nan,
-                        "roll_drift_deg": 1.0, "pitch_drift_deg": -2.0 if good else -7.0,
-                        "foot_pitch_drift_deg": np.nan,
-                    })  # fmt: skip
-                rows.append({
-                    **common, "segment": 2, "class": "turning_in_place", "stand": False,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.5, "yaw_rate": 0.45, "yaw_rate_ratio": 0.9,
-                    "heading_error_max_deg": 4.0, "heading_error_final_deg": 4.0,
-                    "alternates": True, "sliding_linear": 1.0, "sliding_angular": 8.0,
-                    "sliding_linear_position": 1.0,
-                    "base_travel_m": np.nan, "base_travel_limit_m": np.nan,
-                    "foot_speed_max": np.nan, "roll_drift_deg": 0.5, "pitch_drift_deg": 0.5,
-                    "foot_pitch_drift_deg": 0.5,
-                })  # fmt: skip
-                rows.append({
-                    **common, "segment": 3, "class": "standing", "stand": True,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.0, "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                    "heading_error_max_deg": 0.5, "heading_error_final_deg": 0.5,
-                    "alternates": True, "sliding_linear": 0.0, "sliding_angular": 0.0,
-                    "sliding_linear_position": 0.0,
-                    "base_travel_m": 0.02 if good else 0.2, "base_travel_limit_m": 0.04,
-                    "foot_speed_max": 0.01, "roll_drift_deg": 0.1, "pitch_drift_deg": 0.1,
-                    "foot_pitch_drift_deg": 0.1,
-                })  # fmt: skip
-    return pd.DataFrame(rows)
 
 
 def test_summary_medians_and_criteria():

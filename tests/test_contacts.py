@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import EVALUATE_PARAMS
 
 from pimann.core.contacts import (
     FEET,
@@ -97,7 +97,7 @@ def _trajectory(robot, base_positions, rate=50.0):
 
 
 def test_corner_heights_match_pinocchio(robot, rng):
-    from conftest import random_configuration
+    from builders import random_configuration
 
     configurations = np.array([random_configuration(robot, rng) for _ in range(5)])
     kinematics = foot_kinematics(robot, configurations)

@@ -7,37 +7,16 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import (
+    EVALUATE_PARAMS,
+    walking_clip,  # noqa: F401
+)
 
 from pimann.core.params import load_params
-from pimann.core.robot import load_robot
-from pimann.core.trajectory import Trajectory, write_collection
+from pimann.core.trajectory import write_collection
 from pimann.evaluate.data_reference import FRAMES, clip_reference, data_reference
 from pimann.learn.features import split_sources
-
-RATE = 50.0
-HEADING = 0.4
-
-
-def walking_clip(speed: float, frames: int, source: str, contacts: bool | None = None):
-    """The standing robot (both feet on the floor) slid along its heading at `speed` m/s."""
-    robot = load_robot("retarget")
-    q = robot.standing_configuration()
-    _, quaternion, joints = robot.split_configuration(q)
-    t = np.arange(frames) / RATE
-    forward = np.array([np.cos(HEADING), np.sin(HEADING), 0.0])
-    turned = pin.Quaternion(pin.utils.rotate("z", HEADING) @ pin.Quaternion(quaternion).matrix())
-    return Trajectory(
-        time=t,
-        base_position=q[:3] + speed * t[:, None] * forward,
-        base_quaternion_xyzw=np.tile(turned.coeffs(), (frames, 1)),
-        joint_positions=np.tile(joints, (frames, 1)),
-        source=source,
-        rate_hz=RATE,
-        contacts=None if contacts is None else np.full((frames, 2), contacts),
-    )
 
 
 @pytest.fixture(scope="module")

@@ -8,46 +8,20 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EVALUATE_PARAMS
-from scipy.spatial.transform import Rotation
+from builders import EVALUATE_PARAMS, RATE, make_trajectory
 
 from pimann.core.params import load_params
-from pimann.core.robot import STANDING_BASE_HEIGHT, STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
+from pimann.core.robot import STANDING_JOINTS
 from pimann.core.trajectory import Trajectory, write_collection
 from pimann.evaluate import data_report as dr
 from pimann.evaluate import data_report_output as dro
 from pimann.evaluate.metrics import trajectory_metrics
 from pimann.learn import motion_classes as mc
 
-RATE = 50.0
-
 
 @pytest.fixture(scope="module")
 def params():
     return dataclasses.replace(load_params(), evaluate=EVALUATE_PARAMS)
-
-
-def make_trajectory(xy, yaw=0.0, z=0.0, contacts=None, joints=None, **attrs) -> Trajectory:
-    """The standing robot (feet on the floor at z = 0) moved rigidly along xy (T, 2) and
-    turned to yaw, lifted by z."""
-    xy = np.asarray(xy, dtype=float)
-    n = len(xy)
-    yaw = np.broadcast_to(np.asarray(yaw, dtype=float), (n,))
-    z = np.broadcast_to(np.asarray(z, dtype=float), (n,))
-    standing = Rotation.from_quat(STANDING_BASE_QUATERNION_XYZW)
-    quaternions = (Rotation.from_euler("z", yaw[:, None]) * standing).as_quat()
-    position = np.column_stack([xy, STANDING_BASE_HEIGHT + z])
-    joints = np.tile(STANDING_JOINTS, (n, 1)) if joints is None else joints
-    return Trajectory(
-        time=np.arange(n) / RATE,
-        base_position=position,
-        base_quaternion_xyzw=quaternions,
-        joint_positions=joints,
-        source=attrs.pop("source", "synthetic.bvh"),
-        rate_hz=RATE,
-        contacts=contacts,
-        attrs=attrs,
-    )
 
 
 def line(speed: float, direction: float, seconds: float, start=(0.0, 0.0)) -> np.ndarray:

@@ -9,9 +9,12 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-import torch
-from test_claims import REFERENCE, crafted_metrics
-from test_rollouts import benchmark_collection
+from builders import (
+    REFERENCE,
+    benchmark_collection,
+    crafted_metrics,
+    tiny_models,  # noqa: F401
+)
 
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
@@ -82,27 +85,6 @@ def test_results_record_provenance(params, tmp_path):
         assert metric in summary["summary"]["forward"]["nosteering"]["w10"]["metrics"]
 
 
-def _tiny_models(root, weight: float, variant: str, seeds):
-    from pimann.core.params import ModelParams
-    from pimann.learn.feature_layout import FeatureLayout, Normalisation
-    from pimann.learn.mann import MANN
-    from pimann.learn.model_files import save_model
-
-    layout = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, variant)
-    small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
-    for seed in seeds:
-        torch.manual_seed(seed)
-        model = MANN(layout.input_dim, layout.output_dim, small, seeds=[seed])
-        stats = Normalisation(
-            np.zeros(layout.input_dim), np.ones(layout.input_dim),
-            np.zeros(layout.output_dim), 0.01 * np.ones(layout.output_dim),
-        )  # fmt: skip
-        meta = {"pi_weight": weight, "seed": seed, "variant": variant, "epochs": 3,
-                "best_epoch": 2, "train_clips": ["a", "b"], "test_clips": ["c"],
-                "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
-        save_model(root / str(seed), model, layout, stats, meta)
-
-
 def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     from pimann.core.params import MotionSegment
 
@@ -122,8 +104,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
         ),
         figures=dataclasses.replace(params.figures, scenario="short"),
     )
-    _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
-    _tiny_models(tmp_path / "models" / "baseline", 0.0, "ground_projected", [0])
+    tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
+    tiny_models(tmp_path / "models" / "baseline", 0.0, "ground_projected", [0])
     rollouts = tmp_path / "rollouts"
     for name in ("w10", "baseline"):
         written = run_rollouts(tmp_path / "models" / name, rollouts / name, short, workers=1)
@@ -221,7 +203,7 @@ def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp
         ),
     )  # fmt: skip
     models = tmp_path / "models" / "w10"
-    _tiny_models(models, 10.0, "full", [0, 1])
+    tiny_models(models, 10.0, "full", [0, 1])
     broken = models / "1" / "model.pt"
     broken.write_bytes(broken.read_bytes()[:100])  # truncated
     out = tmp_path / "rollouts" / "w10"

@@ -8,64 +8,22 @@ import logging
 
 import h5py
 import numpy as np
-import pandas as pd
 import pytest
-from test_claims import REFERENCE, crafted_metrics
+from builders import (
+    REFERENCE,
+    crafted_results,  # noqa: F401
+)
 
 from pimann.core.params import load_params
 from pimann.core.robot import JOINT_NAMES
-from pimann.evaluate.evaluation import provenance, write_results
 from pimann.evaluate.figure_style import save_figure
 from pimann.evaluate.results import load_results
-from pimann.generate.rollout_layout import RolloutKey
 from pimann.report.figures import FIGURES, fig_foot_heights, make_figures
 
 
 @pytest.fixture(scope="module")
 def params():
     return load_params()
-
-
-def crafted_results(root, params, profile: str = "quick", sim: bool = True, data: bool = True):
-    """results/ as the evaluate stage writes it, with sinusoidal time series."""
-    frame = crafted_metrics()
-    selection = {
-        "base_baseline": RolloutKey("baseline", 2, "forward", False),
-        "base_pi": RolloutKey("w10", 2, "forward", False),
-        "base_pi_steering": RolloutKey("w10", 2, "forward", True),
-        **{f"feet_w{w}": RolloutKey(f"w{w}", 2, "forward", False) for w in (0, 1, 10, 20, 100)},
-    }
-    info = {**provenance(params), "profile": profile}
-    write_results(frame, root, params, info, selection, REFERENCE if data else None)
-    t = np.arange(500) / 50.0
-    (root / "timeseries").mkdir()
-    for k, name in enumerate(("base_baseline", "base_pi", "base_pi_steering")):
-        pd.DataFrame(
-            {"time": t, "base_x": 0.4 * t, "base_y": 0.02 * k * t, "base_z": 0.01 * np.sin(t),
-             "base_roll": 0.01 * np.sin(3 * t), "base_pitch": 0.02 * np.cos(3 * t),
-             "base_yaw": 0.01 * k * t}
-        ).to_csv(root / "timeseries" / f"{name}.csv", index=False)  # fmt: skip
-    for w in (0, 1, 10, 20, 100):
-        phase = 2 * np.pi * t
-        pd.DataFrame(
-            {"time": t,
-             "left_foot_height": np.maximum(0, 0.05 * np.sin(phase)),
-             "right_foot_height": np.maximum(0, -0.05 * np.sin(phase)),
-             "left_sole_pitch": 0.002 * w * np.sin(phase),
-             "right_sole_pitch": -0.002 * w * np.sin(phase),
-             "left_contact": (np.sin(phase) <= 0).astype(int),
-             "right_contact": (np.sin(phase) >= 0).astype(int)}
-        ).to_csv(root / "timeseries" / f"feet_w{w}.csv", index=False)  # fmt: skip
-    if sim:
-        (root / "sim").mkdir()
-        with h5py.File(root / "sim" / "mixed.h5", "w") as file:
-            reference = 0.1 * np.sin(t[:, None] + np.arange(26))
-            file["time"] = t
-            file["joints_reference"] = reference
-            file["joints_measured"] = reference + 0.01
-            file["joints_generated"] = reference - 0.01
-            file.attrs["joint_names"] = list(JOINT_NAMES)
-    return root
 
 
 def test_every_figure_is_written_with_provenance(params, tmp_path):

@@ -12,7 +12,7 @@ import shutil
 import h5py
 import numpy as np
 import pytest
-from test_train import BROKEN_MODELS, break_model, save_small_model
+from builders import BROKEN_MODELS, break_model, save_small_model
 
 from pimann.cli import main
 from pimann.core.params import load_params

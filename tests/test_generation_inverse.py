@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from conftest import EVALUATE_PARAMS
+from builders import EVALUATE_PARAMS
 from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, load_params

@@ -8,9 +8,13 @@ import json
 
 import pytest
 import yaml
-from test_claims import AGREEING, REFERENCE
-from test_command_following import crafted_rows
-from test_figures import crafted_results
+from builders import (
+    AGREEING,
+    REFERENCE,
+    SIM_SUMMARY,  # noqa: F401
+    crafted_results,
+    crafted_rows,
+)
 
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
@@ -25,15 +29,6 @@ from pimann.report.key_metrics import (
     sim_metrics,
     write_key_metrics,
 )
-
-SIM_SUMMARY = {
-    "profile": "quick",
-    "params": {"timestep": 0.001},
-    "runs": {
-        "w10-0-mixed-steering": {"model": "w10", "success": True, "fallen": False},
-        "baseline-0-mixed-nosteering": {"model": "baseline", "success": False, "fallen": True},
-    },
-}
 
 
 @pytest.fixture(scope="module")

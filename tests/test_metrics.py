@@ -8,7 +8,7 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS, random_configuration
+from builders import EVALUATE_PARAMS, random_configuration
 
 from pimann.core.contacts import FEET, foot_kinematics, trajectory_configurations
 from pimann.core.errors import PimannError

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from builders import RATE, GaitModel, roll, synthetic_clip, synthetic_collection
 
 from pimann.core.params import ModelParams, MotionSegment, load_params
 from pimann.core.trajectory import write_collection
@@ -23,8 +24,6 @@ from pimann.learn.features import build_dataset, write_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import load_model, save_model
 from pimann.learn.standing import StandingPose
-from tests.test_features import RATE, synthetic_clip, synthetic_collection
-from tests.test_generate import GaitModel, roll
 
 
 def test_clip_start_takes_the_middle_frame_and_its_motion():

@@ -6,7 +6,7 @@ import re
 
 import numpy as np
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 from scipy.spatial.transform import Rotation
 
 from pimann.core.robot import JOINT_NAMES, SEGMENTS, mirror_joint_name

@@ -8,8 +8,7 @@ import logging
 import re
 
 import pytest
-from test_features import synthetic_collection
-from test_train import SMALL_MODEL
+from builders import SMALL_MODEL, synthetic_collection
 
 from pimann.core.parallel import pool_map
 from pimann.core.params import load_params

@@ -13,9 +13,7 @@ from html.parser import HTMLParser
 import imageio.v2 as imageio
 import numpy as np
 import pytest
-from test_command_following import crafted_rows
-from test_figures import crafted_results
-from test_key_metrics import SIM_SUMMARY
+from builders import SIM_SUMMARY, crafted_results, crafted_rows
 
 from pimann.core.params import load_params
 from pimann.report.page import build_report, markdown_html, write_report

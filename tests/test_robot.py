@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
 from pimann.core.errors import PimannError
 from pimann.core.robot import JOINT_NAMES, SEGMENTS, STANDING_JOINTS, load_robot

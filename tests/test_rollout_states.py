@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from test_train import (  # noqa: F401 (fixtures)
+from builders import (  # noqa: F401 (fixtures)
     SMALL_MODEL,
     dataset_path,
     params,

@@ -14,12 +14,11 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from test_data_reference import walking_clip
+from builders import benchmark_collection, tiny_models, walking_clip
 
 from pimann.core.errors import PimannError
 from pimann.core.params import MotionSegment, StandSegment, load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.core.trajectory import write_collection
 from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
 from pimann.generate.clip_commands import clip_commands
 from pimann.generate.rollout_layout import (
@@ -72,22 +71,6 @@ def test_table_models_and_rows():
     assert pi_models(frame) == {1.0: "w1", 10.0: "w10"}
     assert weight_label(10.0) == "10" and weight_label(0.5) == "0.5"
     assert list(select_rows(frame, "forward", False, model="w10").index) == [1]
-
-
-def benchmark_collection(path):
-    """Sources a, b, c, d: features.split_seed 0 holds out c (a short walk and its 'mirror';
-    one of the three forward sources), leaving a and d (forward) and b (standing) to train on."""
-    write_collection(
-        path,
-        [
-            ("a", walking_clip(0.5, 300, "a")),
-            ("b", walking_clip(0.0, 100, "b")),
-            ("c", walking_clip(0.4, 100, "c")),
-            ("c mirror", walking_clip(0.4, 100, "c")),
-            ("d", walking_clip(0.45, 100, "d")),
-        ],
-    )
-    return path
 
 
 def test_benchmark_scripts_of_the_test_clips_and_a_few_training_clips(tmp_path):
@@ -185,7 +168,6 @@ def test_rollout_users_import_the_layout_not_the_evaluation():
 
 def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
     """One batch per seed (scripts x steering): each file as `pimann generate` writes it."""
-    from test_evaluate import _tiny_models
 
     from pimann.core.trajectory import read_trajectory
     from pimann.generate.generator import generate_file
@@ -209,7 +191,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
             benchmark_train_clips=0,
         ),
     )
-    _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
+    tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
     written = run_rollouts(tmp_path / "models" / "w10", tmp_path / "w10", params, workers=1)
     assert len(written) == 2 * 2 * 2 and (tmp_path / "w10" / "models.json").is_file()
     for key in (RolloutKey("w10", 1, "stop", True), RolloutKey("w10", 0, "short", False)):

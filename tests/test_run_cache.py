@@ -25,7 +25,7 @@ from pimann.learn.features import build_dataset, write_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))  # test_features' synthetic clips
-from test_features import synthetic_collection  # noqa: E402
+from builders import synthetic_collection  # noqa: E402
 
 # what a clone of the pipeline needs to run the training stages (no results, no lock file)
 PROJECT = ["dvc.yaml", "params.yaml", ".dvc/config", ".dvcignore", ".gitignore"]

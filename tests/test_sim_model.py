@@ -6,7 +6,7 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
 from pimann.core.params import load_params
 from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, load_robot

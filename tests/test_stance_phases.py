@@ -6,8 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import EVALUATE_PARAMS
-from test_data_reference import walking_clip
+from builders import EVALUATE_PARAMS, walking_clip
 
 from pimann.core.robot import load_robot
 from pimann.evaluate.data_reference import clip_reference

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
 from pimann.core.contacts import FEET
 from pimann.evaluate.support_velocity import support_foot_velocities

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from builders import synthetic_collection
 
 from pimann.core.params import ModelParams, load_params
 from pimann.core.trajectory import write_collection
@@ -15,7 +16,6 @@ from pimann.learn.features import build_dataset, write_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
 from pimann.learn.teacher_forcing import _slope, class_response
-from tests.test_features import synthetic_collection
 
 
 def test_slope_of_a_scaled_copy_and_of_a_constant():
