@@ -15,7 +15,6 @@ from pimann.core.errors import PimannError
 from pimann.core.params import EvaluateParams
 from pimann.core.robot import JOINT_NAMES, SOLE_HALF_LENGTH
 from pimann.core.trajectory import Trajectory, write_collection, write_trajectory
-from pimann.evaluate.manifold_differences import manifold_velocities
 from pimann.evaluate.metrics import (
     aggregate,
     in_representation,
@@ -23,6 +22,7 @@ from pimann.evaluate.metrics import (
     trajectory_metrics,
     trajectory_time_series,
 )
+from pimann.evaluate.sliding import manifold_velocities
 
 PARAMS = EVALUATE_PARAMS
 RATE = 50.0

@@ -1,4 +1,4 @@
-"""Where in a stance the feet slide (pimann.evaluate.stance_phases): labels worked out by hand,
+"""Where in a stance the feet slide (pimann.evaluate.sliding): labels worked out by hand,
 shares
 of known sums, and the columns pimann.evaluate.metrics and pimann.evaluate.data_reference report."""
 
@@ -11,7 +11,7 @@ from builders import EVALUATE_PARAMS, walking_clip
 from pimann.core.robot import load_robot
 from pimann.evaluate.data_reference import clip_reference
 from pimann.evaluate.metrics import trajectory_metrics
-from pimann.evaluate.stance_phases import PHASES, phase_shares, stance_phases
+from pimann.evaluate.sliding import PHASES, phase_shares, stance_phases
 
 # one foot: a stance under way at the start (frames 0-2), one seen whole (5-11), one still on
 # at the end (13-14); edge 2: two frames each side

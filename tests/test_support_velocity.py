@@ -1,4 +1,4 @@
-"""The velocity level's sole twists (pimann.evaluate.support_velocity) against placements alone: the
+"""The velocity level's sole twists (pimann.evaluate.sliding) against placements alone: the
 support sole still, the other sole moving as the joints carry it relative to the support."""
 
 from __future__ import annotations
@@ -9,7 +9,7 @@ import pytest
 from builders import random_configuration
 
 from pimann.core.contacts import FEET
-from pimann.evaluate.support_velocity import support_foot_velocities
+from pimann.evaluate.sliding import support_foot_velocities
 
 
 def _moved(robot, q, joint_velocities, step):

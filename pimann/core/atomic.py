@@ -1,4 +1,7 @@
-"""Atomic outputs: a stage that fails leaves nothing half-written behind."""
+"""Atomic outputs: a stage that fails leaves nothing half-written behind.
+
+Under 60 lines: one small concept every stage writing a file uses.
+"""
 
 from __future__ import annotations
 

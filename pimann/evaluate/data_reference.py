@@ -11,7 +11,7 @@ RMSE a 10 s forward rollout as good as the clip would score. The level is the me
 clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over the test clips
 (the features stage's split by source clip, a clip and its mirror together).
 
-Beside them, where in a stance the data slides (pimann.evaluate.stance_phases: the shares of the
+Beside them, where in a stance the data slides (pimann.evaluate.sliding: the shares of the
 linear
 sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
 
@@ -32,7 +32,7 @@ from pimann.core.params import EvaluateParams, Params
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory, iter_collection
 from pimann.evaluate.metrics import SLIDING, aggregate, sliding_frames
-from pimann.evaluate.stance_phases import PHASES, SHARE_METRICS, phase_share_metrics
+from pimann.evaluate.sliding import PHASES, SHARE_METRICS, phase_share_metrics
 from pimann.learn.features import split_sources
 from pimann.learn.motion_classes import CLASSES, motion_classes
 

@@ -9,7 +9,7 @@ and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported
 Two levels: the velocity level (the authors' code, `support_rmse_<linear|angular>_*`) moves
 the joints at the file's joint velocities (a rollout's: the network's predicted ones; none:
 central finite differences of the joints) and the base so that the lowest-corner foot stays
-still (pimann.evaluate.support_velocity): the support sole never slides there, the other one slides
+still (pimann.evaluate.sliding): the support sole never slides there, the other one slides
 as
 the joint velocities move it while both are down; the position level
 (`support_rmse_<part>_position_*`) takes every velocity, the base's too, from central finite
@@ -23,7 +23,7 @@ linear part are also reported with the authors' contact rule (`*_origin_contacts
 trigger on the sole origin's height instead of the lowest corner's, so a sole tipped onto its
 heel or toe is not counted down.
 
-Foot-skating ratio: pimann.evaluate.foot_skating.
+Foot-skating ratio: pimann.evaluate.sliding.
 
 Drift: base displacement since the first frame, in the first frame's heading frame (x forward,
 y left), and changes of roll, pitch and (unwrapped) yaw since the first frame.
@@ -53,10 +53,13 @@ from pimann.core.errors import PimannError, about
 from pimann.core.params import EvaluateParams, load_params
 from pimann.core.robot import Robot, load_robot
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
-from pimann.evaluate.foot_skating import skating_ratio
-from pimann.evaluate.manifold_differences import manifold_velocities
-from pimann.evaluate.stance_phases import SHARE_METRICS, phase_share_metrics
-from pimann.evaluate.support_velocity import support_foot_velocities
+from pimann.evaluate.sliding import (
+    SHARE_METRICS,
+    manifold_velocities,
+    phase_share_metrics,
+    skating_ratio,
+    support_foot_velocities,
+)
 
 SIDES = ("left", "right")
 # the paper's baseline sliding RMSE (linear, angular): the claims and the data report compare

@@ -7,12 +7,14 @@ script and steering switch) costs one network call, one vectorised leg-odometry 
 with no Python loop over rows inside a step. The rules are pimann.generate.generator's (its module
 docstring); each row keeps its own state (stopped, stop blend, goal, path, restart).
 `pimann.generate.generator.generate_batch` drives a `BatchGenerator` over the rows' scripts and a
-single
-rollout (`generate_rollout`) is a batch of one, so a row of a batch equals the same rollout
+single rollout (`generate_rollout`) is a batch of one, so a row of a batch equals the same rollout
 alone (float64: to rounding).
 
 Rows end at different steps: a row past its script's end is held still (stopped) and its
 frames are not kept; the network is evaluated on the walking rows only.
+
+Over 400 lines: one `BatchGenerator` whose per-step state (stop blend, goals, odometry,
+contacts) is one unit; the rules it shares with single rollouts live in generator.py.
 """
 
 from __future__ import annotations

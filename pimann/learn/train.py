@@ -19,6 +19,9 @@ epoch with the lowest test loss is kept, per member.
 `torch.autocast` (about 6x the float32 matmul rate on a CPU with AVX512-BF16): the weights,
 the optimiser state, L_D, L_B's kinematics and the test loss stay float32, and the dropout
 masks are drawn in float32, so both precisions draw the same masks from the same seeds.
+
+Over 400 lines: one training loop (ensembles, workers, checkpoints, precision) that reads as
+a unit; its loss, epochs and model files are already their own modules.
 """
 
 from __future__ import annotations
