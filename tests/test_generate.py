@@ -21,7 +21,7 @@ from pimann.core.contacts import detect_contacts, foot_kinematics, trajectory_co
 from pimann.core.errors import PimannError
 from pimann.core.params import ModelParams, MotionSegment, StandSegment, load_params
 from pimann.core.robot import JOINT_NAMES, STANDING_JOINTS
-from pimann.core.rotations import yaw_of
+from pimann.core.rotations import matrix_to_rpy, yaw_of
 from pimann.core.trajectory import read_trajectory
 from pimann.generate.generator import (
     generate,
@@ -30,7 +30,7 @@ from pimann.generate.generator import (
     scenario_steps,
 )
 from pimann.learn.feature_layout import Normalisation
-from pimann.learn.features import clip_features, matrix_to_rpy
+from pimann.learn.features import clip_features
 from pimann.learn.future_window import interpolation
 from pimann.learn.mann import MANN
 

@@ -77,7 +77,7 @@ def rotation_rpy(
 
 
 def roll_pitch(rotation: np.ndarray) -> np.ndarray:
-    """(B, 2) roll and pitch of rotations (B, 3, 3), as pimann.learn.features.matrix_to_rpy: the
+    """(B, 2) roll and pitch of rotations (B, 3, 3), as `matrix_to_rpy`: the
     inverse of `rotation_rpy` but for yaw (generation's stop blend and fed-back pose)."""
     roll = np.arctan2(rotation[:, 2, 1], rotation[:, 2, 2])
     pitch = np.arctan2(-rotation[:, 2, 0], np.hypot(rotation[:, 0, 0], rotation[:, 1, 0]))
@@ -95,3 +95,36 @@ def exp_so3(omega: np.ndarray) -> np.ndarray:
     skew[:, [7, 2, 3]], skew[:, [5, 6, 1]] = omega, -omega
     skew = skew.reshape(-1, 3, 3)
     return _EYE + a[:, None, None] * skew + (0.5 * b * b)[:, None, None] * (skew @ skew)
+
+
+def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:
+    """(T,3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), yaw unwrapped along T: the
+    features' angles (roll and pitch those of `roll_pitch`, the same operations)."""
+    roll = np.arctan2(rotations[:, 2, 1], rotations[:, 2, 2])
+    pitch = np.arctan2(-rotations[:, 2, 0], np.hypot(rotations[:, 0, 0], rotations[:, 1, 0]))
+    yaw = np.unwrap(np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0]))
+    return np.stack([roll, pitch, yaw], axis=1)
+
+
+def rpy_arcsin_pitch(rotations: np.ndarray) -> np.ndarray:
+    """(..., 3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), pitch as arcsin(-R[2, 0]):
+    the evaluation's base drift. The same angles as `matrix_to_rpy` up to rounding, kept apart
+    because the two formulas differ in the last bits and the metrics' outputs follow them."""
+    roll = np.arctan2(rotations[..., 2, 1], rotations[..., 2, 2])
+    pitch = np.arcsin(np.clip(-rotations[..., 2, 0], -1.0, 1.0))
+    yaw = np.arctan2(rotations[..., 1, 0], rotations[..., 0, 0])
+    return np.stack([roll, pitch, yaw], axis=-1)
+
+
+def quaternion_xyzw_matrices(quaternions: np.ndarray) -> np.ndarray:
+    """(T, 3, 3) rotations of (T, 4) quaternions (x, y, z, w), normalised first."""
+    quaternions = np.asarray(quaternions, dtype=float)
+    x, y, z, w = (quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)).T
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        axis=-2,
+    )

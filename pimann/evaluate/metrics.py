@@ -52,6 +52,7 @@ from pimann.core.contacts import (
 from pimann.core.errors import PimannError, about
 from pimann.core.params import EvaluateParams, load_params
 from pimann.core.robot import Robot, load_robot
+from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
 from pimann.evaluate.sliding import (
     SHARE_METRICS,
@@ -130,30 +131,9 @@ class Analysis:
         return np.sqrt(np.mean(self.velocities(level, frame)[..., components] ** 2, axis=-1))
 
 
-def _euler_rpy(rotations: np.ndarray) -> np.ndarray:
-    """(..., 3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll)."""
-    roll = np.arctan2(rotations[..., 2, 1], rotations[..., 2, 2])
-    pitch = np.arcsin(np.clip(-rotations[..., 2, 0], -1.0, 1.0))
-    yaw = np.arctan2(rotations[..., 1, 0], rotations[..., 0, 0])
-    return np.stack([roll, pitch, yaw], axis=-1)
-
-
-def _base_rotations(trajectory: Trajectory) -> np.ndarray:
-    quaternions = np.asarray(trajectory.base_quaternion_xyzw, dtype=float)
-    x, y, z, w = (quaternions / np.linalg.norm(quaternions, axis=1, keepdims=True)).T
-    return np.stack(
-        [
-            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-        ],
-        axis=-2,
-    )
-
-
 def base_drift(trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     """(T, 3) base displacement in the first frame's heading frame, (T, 3) rpy changes."""
-    angles = _euler_rpy(_base_rotations(trajectory))
+    angles = rpy_arcsin_pitch(quaternion_xyzw_matrices(trajectory.base_quaternion_xyzw))
     angles[:, 2] = np.unwrap(angles[:, 2])
     yaw0 = angles[0, 2]
     cos, sin = math.cos(yaw0), math.sin(yaw0)

@@ -29,13 +29,21 @@ from pimann.core.contacts import SchmittTrigger
 from pimann.core.errors import PimannError
 from pimann.core.params import EvaluateParams, RolloutParams
 from pimann.core.robot import Robot
-from pimann.core.rotations import exp_so3, roll_pitch, rot_z, rotation_rpy, yaw_of, yaw_only
+from pimann.core.rotations import (
+    exp_so3,
+    matrix_to_rpy,
+    roll_pitch,
+    rot_z,
+    rotation_rpy,
+    yaw_of,
+    yaw_only,
+)
 from pimann.core.trajectory import Trajectory
 from pimann.generate.leg_odometry import Odometry
 from pimann.generate.rollout_network import RolloutNetwork
 from pimann.generate.steering import goal_from_command, steer
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
-from pimann.learn.features import first_differences, matrix_to_rpy
+from pimann.learn.features import first_differences
 from pimann.learn.future_window import command_weights, next_future_matrix
 from pimann.learn.standing import StandingPose
 

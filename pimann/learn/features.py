@@ -41,21 +41,13 @@ from scipy.spatial.transform import Rotation
 from pimann.core.atomic import atomic_path
 from pimann.core.errors import PimannError, about, require_finite
 from pimann.core.params import FeaturesParams
-from pimann.core.rotations import yaw_only
+from pimann.core.rotations import matrix_to_rpy, yaw_only
 from pimann.core.trajectory import Trajectory
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
 from pimann.learn.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 from pimann.learn.standing import data_standing
 
 log = logging.getLogger(__name__)
-
-
-def matrix_to_rpy(rotations: np.ndarray) -> np.ndarray:
-    """(T,3) roll, pitch, yaw with R = Rz(yaw) Ry(pitch) Rx(roll), yaw unwrapped along T."""
-    roll = np.arctan2(rotations[:, 2, 1], rotations[:, 2, 2])
-    pitch = np.arctan2(-rotations[:, 2, 0], np.hypot(rotations[:, 0, 0], rotations[:, 1, 0]))
-    yaw = np.unwrap(np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0]))
-    return np.stack([roll, pitch, yaw], axis=1)
 
 
 def first_differences(
