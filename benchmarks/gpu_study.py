@@ -36,8 +36,9 @@ from pimann.core.params import Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import STANDING_JOINTS
 from pimann.core.trajectory import Trajectory
+from pimann.learn.dataset import read_dataset, write_dataset
 from pimann.learn.feature_layout import Normalisation, window_layout
-from pimann.learn.features import build_dataset, read_dataset, write_dataset
+from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.train import autocast, pick_device, train_models
 from pimann.learn.training_loss import TrainingLoss

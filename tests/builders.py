@@ -43,11 +43,9 @@ from pimann.generate.rollout_layout import (
     BASELINE,
     RolloutKey,
 )
+from pimann.learn.dataset import write_dataset
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
-from pimann.learn.features import (
-    build_dataset,
-    write_dataset,
-)
+from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
 from pimann.learn.train import train_models

@@ -22,14 +22,9 @@ from pimann.core.errors import PimannError
 from pimann.core.params import load_params
 from pimann.core.robot import N_JOINTS
 from pimann.core.trajectory import Trajectory
+from pimann.learn.dataset import read_dataset, write_dataset
 from pimann.learn.feature_layout import FeatureLayout, window_layout
-from pimann.learn.features import (
-    build_dataset,
-    clip_features,
-    read_dataset,
-    split_sources,
-    write_dataset,
-)
+from pimann.learn.features import build_dataset, clip_features, split_sources
 
 
 @pytest.fixture(scope="module")
@@ -236,7 +231,7 @@ def test_settled_contacts_drop_frames_around_switches():
 
 
 def test_normalisation_uses_training_statistics_only(params, tmp_path):
-    from pimann.learn.features import write_dataset
+    from pimann.learn.dataset import write_dataset
 
     clips = synthetic_collection(n_sources=6)
     dataset = build_dataset(clips, params.features, "full")

@@ -20,7 +20,8 @@ from pimann.generate.mid_stride import (
     network_ratio,
     sustainment,
 )
-from pimann.learn.features import build_dataset, write_dataset
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import load_model, save_model
 from pimann.learn.standing import StandingPose

@@ -13,7 +13,8 @@ from builders import SMALL_MODEL, synthetic_collection
 from pimann.core.parallel import pool_map
 from pimann.core.params import load_params
 from pimann.core.progress import MAX_SECONDS, Progress, track
-from pimann.learn.features import build_dataset, write_dataset
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 from pimann.learn.train import train_models
 
 LOGGER = "pimann.test_progress"

@@ -14,8 +14,8 @@ from builders import (  # noqa: F401 (fixtures)
     trains_differently_and_deterministically,
 )
 
+from pimann.learn.dataset import read_dataset
 from pimann.learn.epochs import epoch_seed
-from pimann.learn.features import read_dataset
 from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
 from pimann.learn.mann import MANN
 from pimann.learn.rollout_states import OwnRollouts, RolloutStates, rollout_pieces

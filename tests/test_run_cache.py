@@ -21,7 +21,8 @@ import yaml
 
 from pimann.core.params import load_params
 from pimann.core.paths import shared_dir
-from pimann.learn.features import build_dataset, write_dataset
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))  # test_features' synthetic clips

@@ -12,7 +12,8 @@ from builders import synthetic_collection
 
 from pimann.core.params import ModelParams, load_params
 from pimann.core.trajectory import write_collection
-from pimann.learn.features import build_dataset, write_dataset
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
 from pimann.learn.teacher_forcing import _slope, class_response

@@ -22,8 +22,8 @@ from builders import (
 )
 
 from pimann.core.errors import PimannError
+from pimann.learn.dataset import write_dataset
 from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
-from pimann.learn.features import write_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import load_model
 from pimann.learn.train import train_models
@@ -94,7 +94,7 @@ def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
 
 def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
     """data_contacts trains on the data's flags, differs from lower_sole, and needs them."""
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     contacts = dataclasses.replace(
         params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
@@ -115,7 +115,7 @@ def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
 
 
 def test_pi_term_enters_the_gradient(params, dataset_path):
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -173,7 +173,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
     """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs only with `both`
     or `base`, the joint velocity outputs unless `base`, the configuration (base pose, joints)
     unless `base` or `joint_velocities`; the loss's value is the same."""
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
@@ -198,7 +198,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
 def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_path):
     """pi_dropout false: L_B is the dropout-free prediction's (the eval-mode network's), L_D
     keeps its dropout; the training then differs from the paper's and stays deterministic."""
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -228,7 +228,7 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
 
 
 def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(dataset_path):
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     layout = read_dataset(dataset_path).layout
     mask = layout.fed_back_columns()
@@ -244,7 +244,7 @@ def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(datase
 def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_path):
     """Each member's noise comes from its own seed and epoch: alike in any group, new each
     epoch; nothing where the std is 0 (the paper)."""
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     columns = data.layout.fed_back_columns()
@@ -293,7 +293,7 @@ BF16_LOSS_RTOL = 0.01
 
 
 def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
-    from pimann.learn.features import read_dataset
+    from pimann.learn.dataset import read_dataset
     from pimann.learn.train import autocast
 
     data = read_dataset(dataset_path)

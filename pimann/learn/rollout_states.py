@@ -26,9 +26,9 @@ import numpy as np
 import torch
 
 from pimann.core.params import TrainParams
+from pimann.learn.dataset import FeatureDataset
 from pimann.learn.epochs import epoch_seed
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
-from pimann.learn.features import FeatureDataset
 from pimann.learn.future_window import command_weights, next_future_matrix
 
 

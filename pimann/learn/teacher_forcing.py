@@ -34,7 +34,8 @@ from pimann.core.params import load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import JOINT_NAMES
 from pimann.core.trajectory import iter_collection
-from pimann.learn.features import REVERSED_SUFFIX, read_dataset, time_reversed
+from pimann.learn.dataset import read_dataset
+from pimann.learn.features import REVERSED_SUFFIX, time_reversed
 from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import CLASSES, motion_classes
 from pimann.learn.training_loss import TrainingLoss

@@ -46,8 +46,8 @@ from pimann.core.parallel import cpu_workers, pool_map, training_threads
 from pimann.core.params import Params, as_dict
 from pimann.core.progress import Progress
 from pimann.core.stage_times import note
+from pimann.learn.dataset import read_dataset
 from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
-from pimann.learn.features import read_dataset
 from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
