@@ -14,7 +14,6 @@ import h5py
 import numpy as np
 import pandas as pd
 import pinocchio as pin
-import pytest
 import torch
 from scipy.spatial.transform import Rotation
 from torch import nn
@@ -43,9 +42,7 @@ from pimann.generate.rollout_layout import (
     BASELINE,
     RolloutKey,
 )
-from pimann.learn.dataset import write_dataset
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
-from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
 from pimann.learn.train import train_models
@@ -294,22 +291,6 @@ SMALL_MODEL = ModelParams(
     n_experts=2, gating_hidden=8, gating_layers=3, prediction_hidden=32, prediction_layers=3,
     dropout=0.3, activation="elu",
 )  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def params():
-    base = load_params()
-    train = dataclasses.replace(base.train, epochs=4, batch_size=64, device="cpu")
-    return dataclasses.replace(base, model=SMALL_MODEL, train=train)
-
-
-@pytest.fixture(scope="module")
-def dataset_path(tmp_path_factory, params):
-    """A tiny dataset: 4 synthetic sources and their 'mirrors', ~50 samples each."""
-    dataset = build_dataset(synthetic_collection(n_sources=4, frames=160), params.features, "full")
-    path = tmp_path_factory.mktemp("features") / "full.h5"
-    write_dataset(path, dataset)
-    return path
 
 
 def _weights(directory) -> dict[str, torch.Tensor]:

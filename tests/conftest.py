@@ -1,12 +1,18 @@
-"""Shared fixtures: the real ergoCub model from the shared folder, seeded generators."""
+"""Shared fixtures: the real ergoCub model from the shared folder, seeded generators, and the
+small training's params and dataset (test_train, test_rollout_states)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
+from builders import SMALL_MODEL, synthetic_collection
 
 from pimann.core.params import SimulateParams, load_params
 from pimann.core.robot import Robot, load_robot
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
 
@@ -58,3 +64,21 @@ def real_walks():
         "walk_mirrored": mirror_trajectory(forward),
         "walk_back": retarget_file(root / REAL_BACKWARD, params),
     }
+
+
+@pytest.fixture(scope="module")
+def params():
+    """The small training's params (test_train, test_rollout_states); a test module's own
+    `params` fixture overrides this one."""
+    base = load_params()
+    train = dataclasses.replace(base.train, epochs=4, batch_size=64, device="cpu")
+    return dataclasses.replace(base, model=SMALL_MODEL, train=train)
+
+
+@pytest.fixture(scope="module")
+def dataset_path(tmp_path_factory, params):
+    """A tiny dataset: 4 synthetic sources and their 'mirrors', ~50 samples each."""
+    dataset = build_dataset(synthetic_collection(n_sources=4, frames=160), params.features, "full")
+    path = tmp_path_factory.mktemp("features") / "full.h5"
+    write_dataset(path, dataset)
+    return path

@@ -7,10 +7,8 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from builders import (  # noqa: F401 (fixtures)
+from builders import (
     SMALL_MODEL,
-    dataset_path,
-    params,
     trains_differently_and_deterministically,
 )
 

@@ -1,6 +1,6 @@
 """The rollouts' layout (pimann.generate.rollout_layout) and runner (pimann.generate.rollouts):
-paths, the
-table's model names, and that both sit apart from the evaluation (the layout also apart from
+paths, the table's model names, and that both sit apart from the evaluation (the layout also apart
+from
 the generator)."""
 
 from __future__ import annotations

@@ -4,8 +4,7 @@ Command scripts from the data: pimann.generate.clip_commands.
 
 Measures per segment of a rollout (`follow_measures`), frame k of a 50 Hz rollout being the
 state after step k (pimann.generate.command_script.scenario_steps: segment i runs from its start
-state, the
-last frame of segment i - 1, to its last frame):
+state, the last frame of segment i - 1, to its last frame):
 - achieved mean planar velocity in the heading frame (per-step displacements rotated by the
   step's mean yaw) and yaw rate over the segment after `settle_s` (default: `SETTLE_FRACTION`
   of the segment, at least `SETTLE_MIN_S`, at most half of it: 2 s of a 10 s command, whose

@@ -3,8 +3,7 @@ measured as the rollouts are (the evaluate stage writes it into metrics_summary.
 
 For each clip of the collection (`features.input`): the per-frame RMS of every sliding metric
 of pimann.evaluate.metrics (`SLIDING`: both levels, both representations), masked by contact with
-the
-evaluate rule (the Schmitt trigger on the lowest sole corner, never the file's own contacts),
+the evaluate rule (the Schmitt trigger on the lowest sole corner, never the file's own contacts),
 averaged over the two feet, summed over the clip's forward-walking frames
 (pimann.learn.motion_classes) and scaled to `FRAMES` frames (the paper's 10 s at 50 Hz): the total
 RMSE a 10 s forward rollout as good as the clip would score. The level is the median over the
@@ -12,8 +11,7 @@ clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over
 (the features stage's split by source clip, a clip and its mirror together).
 
 Beside them, where in a stance the data slides (pimann.evaluate.sliding: the shares of the
-linear
-sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
+linear sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
 
 The retargeted data carries no joint velocities: its velocity level takes the joints' central
 differences (and the base that holds the lower foot still), its position level the base's and

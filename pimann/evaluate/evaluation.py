@@ -249,8 +249,7 @@ def write_results(
     """metrics.csv, metrics_summary.json and claims.md under `results_dir` (atomic each).
 
     `data_reference`: the data's own level (pimann.evaluate.data_reference), into the summary and
-    the
-    claims table when given.
+    the claims table when given.
     """
     results_dir = Path(results_dir)
     tidy = frame.assign(profile=info.get("profile"), epochs=info.get("epochs"))

@@ -3,8 +3,7 @@ command_following.csv, command_following.md and command_following.png.
 
 Every rollout (layout: pimann.generate.rollout_layout) is measured against the script it ran (its
 attrs["script"]) by pimann.evaluate.command_following.follow_measures, one row per script segment,
-keyed
-by model, variant, pi_weight, seed, scenario, steering, `kind`: `scenario` (a named scenario
+keyed by model, variant, pi_weight, seed, scenario, steering, `kind`: `scenario` (a named scenario
 of rollout.scenarios) or `clip` (the benchmark script of a test clip, `clip_<clip name>`, or of
 a training clip, `train_<clip name>`) and `split` (pimann.generate.rollout_layout.scenario_split:
 `training` for a training clip's script, `held_out` for the rest, whose commands no training

@@ -10,8 +10,7 @@ Two levels: the velocity level (the authors' code, `support_rmse_<linear|angular
 the joints at the file's joint velocities (a rollout's: the network's predicted ones; none:
 central finite differences of the joints) and the base so that the lowest-corner foot stays
 still (pimann.evaluate.sliding): the support sole never slides there, the other one slides
-as
-the joint velocities move it while both are down; the position level
+as the joint velocities move it while both are down; the position level
 (`support_rmse_<part>_position_*`) takes every velocity, the base's too, from central finite
 differences of q on the configuration manifold (`pinocchio.difference`): whether the feet of
 the trajectory a robot would track move. The linear part in `evaluate.foot_velocity_frame`:

@@ -49,8 +49,8 @@ The ground-projected baseline (layout variant `ground_projected`) is rolled out 
 frame: the base orientation keeps yaw only (roll and pitch 0), as in its training data.
 
 Batches. These rules run in pimann.generate.batch_generate, vectorised over rollouts of one model
-(one
-network call per step for every walking row, vectorised leg odometry (pimann.generate.leg_odometry),
+(one network call per step for every walking row, vectorised leg odometry
+(pimann.generate.leg_odometry),
 contacts and steering; each row its own script, stops and restarts). `generate_rollout` is a
 batch of one, so a rollout alone equals its row of any batch (to rounding: on the CPU a MANN
 runs in numpy (`rollout_network.NumpyMANN`), and BLAS rounds a row differently at other batch
@@ -216,8 +216,7 @@ def generate_rollout(
     """Roll the network out over `scenario`; see the module docstring for every rule.
 
     A batch of one (pimann.generate.batch_generate.generate_batch): the same trajectory as its row
-    of
-    any batch. `standing`: the pose to start from and return to (default: the nominal one).
+    of any batch. `standing`: the pose to start from and return to (default: the nominal one).
     """
     spec = RolloutSpec(list(scenario), bool(steering), source, attrs)
     return generate_batch(

@@ -2,8 +2,8 @@
 
 Generation places the base so that the support point (the lowest sole corner) stays where it
 was (pimann.generate.generator's rule 4). That needs both sole frames in the base frame at every
-step of
-every rollout: one pinocchio pass per rollout and step would be a Python loop over rows, so the
+step of every rollout: one pinocchio pass per rollout and step would be a Python loop over rows, so
+the
 two leg chains are evaluated here in numpy, all rows at once, on the geometry the torch
 kinematics (pimann.learn.kinematics_torch) reads from the pinocchio model: one 3x3 product per joint
 depth, whatever the number of rows.

@@ -16,8 +16,7 @@ end name the models of a table keyed like the layout (model, pi_weight, seed, sc
 steering), as the evaluation's metrics.csv is.
 
 Apart from the runner (pimann.generate.rollouts): the simulation, the evaluation and the figures
-read
-the layout from here without depending on the generator or the training code.
+read the layout from here without depending on the generator or the training code.
 """
 
 from __future__ import annotations

@@ -5,8 +5,7 @@ pimann.generate.rollout_layout.
 The scripts are the named scenarios of `rollout.scenario_names` and, with
 `rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
 features stage's split (pimann.generate.benchmark_clips), with `rollout.benchmark_train_clips` also
-of a
-few training clips per motion class.
+of a few training clips per motion class.
 """
 
 from __future__ import annotations

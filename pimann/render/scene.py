@@ -2,8 +2,7 @@
 camera.
 
 Split from pimann.render.trajectory (which turns trajectories and mocap into `Skeleton`s and writes
-the
-files): orthographic projection onto plain 2-D axes, artists created once and only updated per
+the files): orthographic projection onto plain 2-D axes, artists created once and only updated per
 frame over a saved background (blitting), a few milliseconds a frame.
 """
 

@@ -3,8 +3,7 @@
 One function per figure, each returning a matplotlib Figure (None when its data is missing;
 pyplot-free, so no global state or GUI backend);
 `make_figures` saves them as PDF and PNG. One style for all (pimann.evaluate.figure_style: single
-IEEE
-column, 3.5 in wide, 8 pt), one colour per PI weight everywhere (`weight_colours`), legends
+IEEE column, 3.5 in wide, 8 pt), one colour per PI weight everywhere (`weight_colours`), legends
 above the axes (never over the data). Every file records its provenance (profile, epochs,
 clips) in its metadata, and a figure made from anything but the `paper` profile says so in a
 small footer.
