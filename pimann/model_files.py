@@ -11,11 +11,12 @@ import warnings
 from pathlib import Path
 
 import torch
+from pydantic import ValidationError
 
 from pimann.errors import PimannError, about
 from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.mann import MANN
-from pimann.params import ModelParams
+from pimann.params import ModelParams, validation_problem
 
 MODEL_FILE = "model.pt"
 META_FILE = "meta.json"
@@ -115,6 +116,8 @@ def load_model(
     try:
         model_params = ModelParams(**blob["model_params"])
         model = MANN(*dims, model_params, ensemble=1, seeds=[meta["seed"]])
+    except ValidationError as error:
+        raise PimannError(path, f"model_params: {validation_problem(error)}") from None
     except (TypeError, ValueError, RuntimeError) as error:
         raise PimannError(path, f"model_params: {error}") from None
     weights, expected = blob["state_dict"], model.state_dict()
