@@ -28,7 +28,7 @@ from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.features import first_differences, matrix_to_rpy
 from pimann.future_window import command_weights, next_future_matrix
 from pimann.leg_odometry import Odometry
-from pimann.params import EvaluateParams, RolloutParams
+from pimann.params import ContactParams, RolloutParams
 from pimann.robot import Robot
 from pimann.rollout_network import RolloutNetwork
 from pimann.rotations import rot_z, yaw_of, yaw_only
@@ -99,7 +99,7 @@ class BatchGenerator:
         params: RolloutParams,
         steering: np.ndarray,
         robot: Robot,
-        contact_params: EvaluateParams,
+        contact_params: ContactParams,
         standing: StandingPose,
     ):
         rows = len(steering)
@@ -198,7 +198,7 @@ class BatchGenerator:
             self.rotation, self.joints, np.array(position, float)
         )
         self.trigger = SchmittTrigger.from_params(
-            self.contact_params, self.dt, heights <= self.contact_params.contact_on_height
+            self.contact_params, self.dt, heights <= self.contact_params.on_height
         )
         self.contacts = self.trigger.state
         self.stopped[:] = False

@@ -80,6 +80,7 @@ def cmd_render(args: argparse.Namespace) -> None:
     }  # fmt: skip
     render_file(
         args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton,
+        contacts=_params(args).contacts,
         **{k: v for k, v in options.items() if v is not None},
     )  # fmt: skip
 
@@ -99,7 +100,8 @@ def cmd_metrics(args: argparse.Namespace) -> None:
 
     trajectory = _read_trajectory(args)
     with about(args.file):
-        metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
+        params = _params(args)
+        metrics = trajectory_metrics(trajectory, load_robot(), params.evaluate, params.contacts)
     print(json.dumps(metrics, indent=2))
 
 

@@ -49,7 +49,7 @@ from pimann.contacts import frame_period
 from pimann.errors import PimannError
 from pimann.metrics import trajectory_time_series
 from pimann.motion_classes import CLASSES
-from pimann.params import EvaluateParams, Segment, StandSegment
+from pimann.params import ContactParams, EvaluateParams, Segment, StandSegment
 from pimann.robot import Robot
 from pimann.rotations import yaw_of
 from pimann.trajectory import Trajectory
@@ -126,6 +126,7 @@ def follow_measures(
     script: Sequence[Segment],
     robot: Robot,
     evaluate_params: EvaluateParams,
+    contact_params: ContactParams,
     *,
     settle_s: float | None = None,
 ) -> list[dict[str, Any]]:
@@ -138,7 +139,7 @@ def follow_measures(
             f"has {len(rollout)} frames, a rollout of the script has {bounds[-1][1] + 1}",
         )
     series = trajectory_time_series(
-        dataclasses.replace(rollout, contacts=None), robot, evaluate_params
+        dataclasses.replace(rollout, contacts=None), robot, evaluate_params, contact_params
     )  # contacts by the evaluate rule from the geometry
     position = np.asarray(rollout.base_position, dtype=float)[:, :2]
     yaw = np.unwrap(yaw_of(Rotation.from_quat(rollout.base_quaternion_xyzw).as_matrix()))

@@ -159,7 +159,9 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
     robot = load_robot("retarget")
     time = np.asarray(trajectory.time, dtype=float)
     dt = frame_period(trajectory)
-    analysis = analyse(trajectory, robot, params.evaluate, file_contacts=False)  # as evaluated
+    analysis = analyse(
+        trajectory, robot, params.evaluate, params.contacts, file_contacts=False
+    )  # as evaluated
     rms = {kind: analysis.rms(kind) for kind in ("linear", "angular")}
     contacts = {"evaluate_rule": analysis.contacts}
     if trajectory.contacts is not None:
@@ -333,6 +335,7 @@ def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -
         "profile": params.profile,
         "params": {
             "data": as_dict(params.data),
+            "contacts": as_dict(params.contacts),
             "evaluate": as_dict(params.evaluate),
             "features": {
                 "window": params.features.window,

@@ -80,11 +80,10 @@ from pimann.errors import PimannError
 from pimann.feature_layout import FeatureLayout, Normalisation
 from pimann.params import (
     DEFAULT_PARAMS,
-    EvaluateParams,
+    ContactParams,
     Params,
     RolloutParams,
     Segment,
-    load_params,
 )
 from pimann.paths import repo_relative
 from pimann.robot import Robot, load_robot
@@ -127,7 +126,7 @@ def generate_batch(
     params: RolloutParams,
     robot: Robot | None = None,
     *,
-    contact_params: EvaluateParams | None = None,
+    contact_params: ContactParams,
     standing: StandingPose | None = None,
     start_joint_velocities: np.ndarray | None = None,
     timings: dict[str, float] | None = None,
@@ -144,7 +143,7 @@ def generate_batch(
     plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
     generator = BatchGenerator(
         model, layout, stats, params, np.array([spec.steering for spec in specs]),
-        robot or load_robot(), contact_params or load_params().evaluate,
+        robot or load_robot(), contact_params,
         standing or StandingPose.nominal(),
     )  # fmt: skip
     if start_joint_velocities is not None:
@@ -207,7 +206,7 @@ def generate_rollout(
     steering: bool,
     robot: Robot | None = None,
     *,
-    contact_params: EvaluateParams | None = None,
+    contact_params: ContactParams,
     source: str = "generated",
     attrs: dict | None = None,
     standing: StandingPose | None = None,
@@ -302,7 +301,7 @@ def _model_rollouts(
         ]  # fmt: skip
         rollouts = generate_batch(
             model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.evaluate, standing=standing,
+            contact_params=params.contacts, standing=standing,
         )  # fmt: skip
         yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 
@@ -326,8 +325,8 @@ def generate_file(
     model_dir: str | Path,
     scenario_name: str,
     output_path: str | Path,
-    steering: bool = True,
-    params: Params | None = None,
+    steering: bool,
+    params: Params,
     params_path: str | Path = DEFAULT_PARAMS,
     segments: Sequence[Segment] | None = None,
 ) -> Trajectory:
@@ -336,7 +335,6 @@ def generate_file(
     `segments`: the script to run under the name `scenario_name` (default: that scenario of
     rollout.scenarios); recorded in the file's attrs["script"] (pimann.rollouts.script_json).
     """
-    params = params or load_params(params_path)
     if segments is None:
         scenario = scenario_of(params.rollout, scenario_name, params_path)
     else:

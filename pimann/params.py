@@ -259,14 +259,28 @@ class RolloutParams:
 
 
 @dataclass(frozen=True, config=CONFIG)
-class EvaluateParams:
-    """evaluate: metrics (paper Sec. IV)."""
+class ContactParams:
+    """contacts: the contact rule of generated trajectories, a Schmitt trigger on the lowest
+    sole corner (pimann.contacts), shared by every stage that detects contacts."""
 
-    contact_on_height: Positive  # m, lowest sole corner below this -> contact (after the delay)
-    contact_off_height: Positive  # m, above this -> no contact (after the delay)
-    contact_switch_time: (
-        NonNegative  # s, a condition must hold this long before the trigger switches
-    )
+    on_height: Positive  # m, lowest sole corner below this -> contact (after the delay)
+    off_height: Positive  # m, above this -> no contact (after the delay)
+    switch_time: NonNegative  # s, a condition must hold this long before the trigger switches
+
+    @model_validator(mode="after")
+    def _hysteresis(self) -> ContactParams:
+        if self.off_height < self.on_height:
+            raise _fail(
+                f"@off_height must be >= @on_height ({self.off_height:g} < {self.on_height:g})"
+            )
+        return self
+
+
+@dataclass(frozen=True, config=CONFIG)
+class EvaluateParams:
+    """evaluate: metrics (paper Sec. IV), and the PI model the claims and figures feature."""
+
+    pi_weight: Float  # the PI model of the drift figures and the steering claims
     skating_height: Positive  # m, foot-skating: foot below this in two adjacent frames ...
     skating_speed_per_frame: Positive  # m, ... moving more than this per frame ...
     skating_rate_hz: Positive  # ... at this frame rate
@@ -405,7 +419,6 @@ class FiguresParams:
     """figures: what evaluate selects for the paper's figures and claims, and the style."""
 
     scenario: Str  # rollout scenario of the paper's test (10 s forward walking)
-    pi_weight: Float  # the PI model of the drift figures and the steering claims
     box_weights: list[Float]  # weights in the RMSE box plots and the "all w" claims
     large_weight: Float  # the weight said to fail unsteered and to pitch the feet
     foot_height_weights: list[Float]  # the two models of the foot-height figure
@@ -428,6 +441,7 @@ class Params:
     model: ModelParams
     train: TrainParams
     rollout: RolloutParams
+    contacts: ContactParams
     evaluate: EvaluateParams
     simulate: SimulateParams
     figures: FiguresParams
@@ -470,9 +484,10 @@ def _check_references(params: Params) -> None:
     figures, weights = params.figures, params.train.pi_weights
     if figures.scenario not in rolled_out:
         raise _unknown("figures.scenario", figures.scenario, rolled_out)
-    for key in ("pi_weight", "large_weight"):
-        if getattr(figures, key) not in weights:
-            raise _unknown(f"figures.{key}", getattr(figures, key), weights)
+    if params.evaluate.pi_weight not in weights:
+        raise _unknown("evaluate.pi_weight", params.evaluate.pi_weight, weights)
+    if figures.large_weight not in weights:
+        raise _unknown("figures.large_weight", figures.large_weight, weights)
     for key in ("box_weights", "foot_height_weights"):
         for k, weight in enumerate(getattr(figures, key)):
             if weight not in weights:
@@ -486,12 +501,6 @@ def _check_references(params: Params) -> None:
                                        ("scenario", run.scenario, rolled_out)):  # fmt: skip
                 if value not in known:
                     raise _unknown(f"{where}.{k}.{name}", value, known)
-    evaluate = params.evaluate
-    if evaluate.contact_off_height < evaluate.contact_on_height:
-        raise _fail(
-            "evaluate.contact_off_height must be >= evaluate.contact_on_height "
-            f"({evaluate.contact_off_height:g} < {evaluate.contact_on_height:g})"
-        )
 
 
 _PARAMS = TypeAdapter(Params)

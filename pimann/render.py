@@ -23,7 +23,7 @@ from pimann.contacts import detect_contacts, trajectory_configurations
 from pimann.errors import PimannError
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_human
-from pimann.params import SkeletonParams
+from pimann.params import ContactParams, SkeletonParams
 from pimann.picture_files import FORMATS, STRIP_COLUMNS, check_output, write_pictures
 from pimann.render_scene import CENTRE_COLOUR, LEFT_COLOUR, RIGHT_COLOUR, Scene, Skeleton
 from pimann.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot, load_robot
@@ -75,9 +75,13 @@ def _side_colour(name: str) -> str:
 
 
 def robot_skeleton(
-    trajectory: Trajectory, frames: np.ndarray, robot: Robot | None = None
+    trajectory: Trajectory,
+    frames: np.ndarray,
+    robot: Robot | None = None,
+    contacts: ContactParams | None = None,
 ) -> Skeleton:
-    """Joint origins, sole rectangles, hands and head top of the robot at `frames`."""
+    """Joint origins, sole rectangles, hands and head top of the robot at `frames`; the soles'
+    contacts are the file's, else detected by the `contacts` rule (params.yaml `contacts`)."""
     robot = robot or load_robot("retarget")
     model = robot.model
     data = model.createData()  # private: the cached Robot's data may be in use elsewhere
@@ -115,10 +119,13 @@ def robot_skeleton(
         for side, fid in enumerate(sole_ids):
             placement = data.oMf[fid]
             feet[n, side] = FOOT_CORNERS @ placement.rotation.T + placement.translation
+    rule = contacts
     if trajectory.contacts is not None:
         contacts = np.asarray(trajectory.contacts, dtype=bool)[frames]
-    else:  # the evaluation's own detector, so the picture agrees with the metrics
-        contacts = detect_contacts(robot, trajectory)[frames]
+    elif rule is not None:  # the evaluation's own detector, so the picture agrees with the metrics
+        contacts = detect_contacts(robot, trajectory, rule)[frames]
+    else:
+        raise PimannError(trajectory.source, "has no contact flags and no contact rule is given")
     return Skeleton(
         title="ergoCub",
         points=points,
@@ -200,6 +207,7 @@ def render_trajectory(
     strip_frames: int = STRIP_FRAMES,
     strip_columns: int = STRIP_COLUMNS,
     robot: Robot | None = None,
+    contacts: ContactParams | None = None,
 ) -> Path:
     """Draw the robot (and the person beside it) to a .gif, .mp4 or .png strip.
 
@@ -207,7 +215,7 @@ def render_trajectory(
     the clip, played at `fps` (default: real time), each `width` x `height` (960 x 480). A PNG
     is `strip_frames` evenly spaced frames in rows of `strip_columns`, each 480 x 320 unless
     given. `human` may be at another rate: frames are matched by time. Either subject may be
-    None.
+    None. `contacts`: the contact rule of a trajectory without contact flags.
     """
     output_path = Path(output_path)
     suffix = check_output(output_path)
@@ -235,7 +243,7 @@ def render_trajectory(
     times = clock[frames]
     skeletons = []
     if trajectory is not None:
-        skeletons.append(robot_skeleton(trajectory, frames, robot))
+        skeletons.append(robot_skeleton(trajectory, frames, robot, contacts))
     if human is not None:
         skeletons.append(human_skeleton(human, match_frames(times, human.time)))
     scene = Scene(skeletons, times - clock[0], width, height)

@@ -5,16 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pimann.params import EvaluateParams, SimulateParams, load_params
+from pimann.params import ContactParams, EvaluateParams, SimulateParams, load_params
 from pimann.robot import Robot, load_robot
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
 
 # The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
+CONTACT_PARAMS = ContactParams(on_height=0.02, off_height=0.02, switch_time=0.04)
 EVALUATE_PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
+    pi_weight=10.0,
     skating_height=0.05,
     skating_speed_per_frame=0.025,
     skating_rate_hz=20.0,

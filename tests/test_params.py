@@ -84,9 +84,10 @@ def _set(raw: dict, dotted: str, value) -> None:
         ),
         ("simulate.runs.0.model", "w7", r"simulate.runs.0.model: unknown 'w7'; known: w0, w1"),
         ("simulate.runs.0.seed", 9, r"simulate.runs.0.seed: unknown 9"),
-        ("figures.pi_weight", 7, r"figures.pi_weight: unknown 7.0; known: 0.0, 1.0"),
+        ("evaluate.pi_weight", 7, r"evaluate.pi_weight: unknown 7.0; known: 0.0, 1.0"),
         ("figures.box_weights.1", 3, r"figures.box_weights.1: unknown 3.0"),
-        ("evaluate.contact_off_height", 0.01, r"contact_off_height must be >= evaluate.contact_on"),
+        ("contacts.off_height", 0.01, r"contacts.off_height must be >= contacts.on_height"),
+        ("contacts.switch_time", -0.1, r"contacts.switch_time must be >= 0, not -0.1"),
         ("train.seeds", [0, 0], r"train.seeds must be a non-empty list without repeats"),
         ("simulate.mpc.friction", 0.0, r"simulate.mpc.friction must be > 0, not 0.0"),
         ("simulate.mpc.box_y", [0.01, 0.05], r"simulate.mpc.box_y must be \[low <= 0, high >= 0\]"),
@@ -157,8 +158,8 @@ def test_a_bad_profile_value_names_the_profile(tmp_path, raw):
     with pytest.raises(PimannError, match=r"train.epochs must be >= 1, not 0 \(profile quick\)"):
         load_params(_write(tmp_path, raw))
     raw["profiles"]["quick"]["train.epochs"] = 70
-    raw["profiles"]["quick"]["figures.pi_weight"] = 3  # a cross-reference, merged
-    with pytest.raises(PimannError, match=r"figures.pi_weight: unknown 3.*\(profile quick\)"):
+    raw["profiles"]["quick"]["evaluate.pi_weight"] = 3  # a cross-reference, merged
+    with pytest.raises(PimannError, match=r"evaluate.pi_weight: unknown 3.*\(profile quick\)"):
         load_params(_write(tmp_path, raw))
 
 
