@@ -139,9 +139,7 @@ def test_contacts_from_height_when_not_given(robot):
     assert lifted.contacts.tolist() == [[False, False]]
     given = standing(2)
     given.contacts = np.array([[True, False], [False, True]])
-    assert robot_skeleton(given, np.array([1]), robot).contacts.tolist() == [
-        [False, True]
-    ]
+    assert robot_skeleton(given, np.array([1]), robot).contacts.tolist() == [[False, True]]
 
 
 def tpose_human(n: int = 9, rate: float = 100.0, start: float = 3.0) -> HumanMotion:
