@@ -14,8 +14,8 @@ last frame of segment i - 1, to its last frame):
   commanded yaw rate times the time since), final (signed) and largest (absolute), deg;
 - touchdowns per foot and whether the feet alternate (counts differ by at most 1; on a motion
   command at least one, and one each in a segment of two strides or more), under the
-  evaluate stage's contact rule (the Schmitt trigger of pimann.contacts with
-  `evaluate.contact_*`, applied to the trajectory's geometry whatever
+  shared contact rule (params.yaml `contacts`, the Schmitt trigger of pimann.contacts),
+  applied to the trajectory's geometry whatever
   flags the file carries: for a rollout these are the generator's own flags, same rule);
 - support-foot sliding: pimann.metrics' per-frame RMS of the sole velocity where in contact
   (`trajectory_time_series`, the same numbers the paper's total RMSE sums), left and right
