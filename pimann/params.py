@@ -509,9 +509,8 @@ _TAGS = {"int", "float", "str", "bool", "none"}
 
 def _is_tag(part: Any) -> bool:
     """A union member's name pydantic puts in an error's location ('MotionSegment', 'int')."""
-    return isinstance(part, str) and (
-        part in _TAGS or "[" in part or "-" in part or part[:1].isupper()
-    )
+    sections = {name for name, kind in globals().items() if dataclasses.is_dataclass(kind)}
+    return isinstance(part, str) and (part in _TAGS | sections or "[" in part or "-" in part)
 
 
 def _field_type(loc: list) -> Any:
