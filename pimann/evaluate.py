@@ -239,7 +239,8 @@ def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[s
         "pi_weights": list(params.train.pi_weights),
         "scenario": params.figures.scenario,
         "params": {
-            name: as_dict(getattr(params, name)) for name in ("rollout", "evaluate", "figures")
+            name: as_dict(getattr(params, name))
+            for name in ("rollout", "contacts", "evaluate", "figures")
         },
         "models": models,
         "rollout_failures": failed,
