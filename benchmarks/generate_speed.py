@@ -113,7 +113,7 @@ def sections(
         start = time.perf_counter()
         rollouts = generate_batch(
             model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.evaluate, timings=timings,
+            contact_params=params.contacts, timings=timings,
         )  # fmt: skip
         wall = time.perf_counter() - start
         with tempfile.TemporaryDirectory() as folder:
@@ -143,7 +143,7 @@ def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3
     models = [random_model(params, layout, seed) for seed in (0, 1)]
     jobs = [(script, steering) for script in scripts for steering in (False, True)]
     frames = sum(len(scenario_steps(script, layout.rate_hz)) for script, _ in jobs)
-    kwargs = {"contact_params": params.evaluate}
+    kwargs = {"contact_params": params.contacts}
 
     def one_at_a_time() -> None:
         for model in models:

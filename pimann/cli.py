@@ -80,6 +80,7 @@ def cmd_render(args: argparse.Namespace) -> None:
     }  # fmt: skip
     render_file(
         args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton,
+        contacts=_params(args).contacts,
         **{k: v for k, v in options.items() if v is not None},
     )  # fmt: skip
 
@@ -93,13 +94,26 @@ def cmd_generate(args: argparse.Namespace) -> None:
     )
 
 
+def cmd_params(args: argparse.Namespace) -> None:
+    """The effective params of the profile (default: params.yaml's `profile`), as YAML: the
+    base values with the profile's overrides applied, every value checked."""
+    import yaml
+
+    from pimann.core.params import as_dict, load_params
+
+    effective = as_dict(load_params(args.params, args.profile))
+    effective.pop("profiles")  # applied: what the stages read is below
+    print(yaml.safe_dump(effective, sort_keys=False, default_flow_style=False), end="")
+
+
 def cmd_metrics(args: argparse.Namespace) -> None:
     from pimann.core.robot import load_robot
     from pimann.evaluate.metrics import trajectory_metrics
 
     trajectory = _read_trajectory(args)
     with about(args.file):
-        metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
+        params = _params(args)
+        metrics = trajectory_metrics(trajectory, load_robot(), params.evaluate, params.contacts)
     print(json.dumps(metrics, indent=2))
 
 
@@ -263,6 +277,11 @@ def _parser() -> argparse.ArgumentParser:
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")
     metrics.add_argument("--group", help="clip group inside a collection file")
+
+    params = add("params", cmd_params, "the effective params of a profile as YAML")
+    params.add_argument(
+        "--profile", help="a profile of params.yaml's profiles (default: its `profile`)"
+    )
     return parser
 
 

@@ -25,7 +25,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path("paper_figures"))
     args = parse_stage_args(parser, argv, log)
     started = time.perf_counter()
-    written = make_figures(REPO_ROOT / args.results, REPO_ROOT / args.out, load_params().figures)
+    params = load_params()
+    written = make_figures(
+        REPO_ROOT / args.results, REPO_ROOT / args.out, params.figures, params.evaluate.pi_weight
+    )
     log.info("%d figures -> %s in %.1f s", len(written), args.out, time.perf_counter() - started)
 
 

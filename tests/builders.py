@@ -19,6 +19,7 @@ from scipy.spatial.transform import Rotation
 from torch import nn
 
 from pimann.core.params import (
+    ContactParams,
     EvaluateParams,
     ModelParams,
     load_params,
@@ -48,10 +49,9 @@ from pimann.learn.model_files import save_model
 from pimann.learn.train import train_models
 
 # The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
+CONTACT_PARAMS = ContactParams(on_height=0.02, off_height=0.02, switch_time=0.04)
 EVALUATE_PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
+    pi_weight=10.0,
     skating_height=0.05,
     skating_speed_per_frame=0.025,
     skating_rate_hz=20.0,

@@ -64,12 +64,12 @@ def batch_against_alone(
     pairs = [(script, steering) for steering in (False, True) for script in scripts]
     specs = [RolloutSpec(s, st, f"row{i}", {"row": i}) for i, (s, st) in enumerate(pairs)]
     rows = generate_batch(
-        model, LAYOUT, stats, specs, rollout_params, robot, contact_params=params.evaluate
+        model, LAYOUT, stats, specs, rollout_params, robot, contact_params=params.contacts
     )
     for spec, row in zip(specs, rows, strict=True):
         alone = generate_rollout(
             model, LAYOUT, stats, spec.script, rollout_params, spec.steering, robot,
-            contact_params=params.evaluate, source=spec.source, attrs=spec.attrs,
+            contact_params=params.contacts, source=spec.source, attrs=spec.attrs,
         )  # fmt: skip
         assert_same_rollout(alone, row, tolerance)
     return rows
@@ -105,7 +105,7 @@ def trained(robot, params) -> tuple[MANN, Normalisation]:
     walk = M(3.0, 0.5, 0.0, 0.0)
     data = generate_rollout(
         GaitModel(robot), LAYOUT, IDENTITY, [walk, S(1.5, True), walk], params.rollout, True,
-        robot, contact_params=params.evaluate,
+        robot, contact_params=params.contacts,
     ).trajectory  # fmt: skip
     x, y, _ = clip_features(data, LAYOUT)
     stats = Normalisation.fit(x, y)
@@ -168,7 +168,7 @@ def test_a_cpu_model_runs_its_network_in_numpy(robot, params, trained):
     model, stats = trained
     generators = [
         BatchGenerator(candidate, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
-                       params.evaluate, StandingPose.nominal())
+                       params.contacts, StandingPose.nominal())
         for candidate, rows in ((model, 1), (model, 2), (_two_member(model), 2))
     ]  # fmt: skip
     assert isinstance(generators[0].network.numpy, NumpyMANN)  # alone

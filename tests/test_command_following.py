@@ -15,6 +15,7 @@ import numpy as np
 import pandas as pd
 import pytest
 from builders import (
+    CONTACT_PARAMS,
     EVALUATE_PARAMS,
     RATE,
     GaitModel,
@@ -119,7 +120,7 @@ def test_a_clip_follows_its_own_commands(robot):
     """The data's own score: a swaying clip measured against the script cut from it."""
     clip = make_trajectory(*follow(SCRIPT, heading=2.0, wobble=0.1, sway=0.3))
     script = clip_commands(clip)
-    rows = cf.follow_measures(clip, script, robot, EVALUATE_PARAMS)
+    rows = cf.follow_measures(clip, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert [r["class"] for r in rows] == ["standing", "forward", "backward"]
     for row in rows[1:]:
         assert row["speed_ratio"] == pytest.approx(1.0, abs=0.05)
@@ -133,7 +134,7 @@ def test_a_clip_follows_its_own_commands(robot):
 def exact_rows(robot):
     script = [*SCRIPT, MotionSegment(10.0, 0.6, 0.0, 0.3), StandSegment(5.0, True)]
     trajectory = make_trajectory(*follow(script, heading=0.3))
-    return script, cf.follow_measures(trajectory, script, robot, EVALUATE_PARAMS)
+    return script, cf.follow_measures(trajectory, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
 
 
 def test_follow_measures_of_an_exact_follower(exact_rows):
@@ -178,7 +179,7 @@ def test_follow_measures_of_an_exact_follower(exact_rows):
 def test_follow_measures_of_a_robot_that_stands_still(robot):
     script = [MotionSegment(10.0, 0.8, 0.0, 0.0)]
     still = make_trajectory(np.zeros((501, 2)), yaw=0.4)
-    (row,) = cf.follow_measures(still, script, robot, EVALUATE_PARAMS)
+    (row,) = cf.follow_measures(still, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert row["speed_ratio"] == pytest.approx(0.0, abs=1e-9)
     assert row["heading_error_max_deg"] == pytest.approx(0.0, abs=1e-9)
     assert row["alternates"] is False
@@ -193,7 +194,9 @@ def test_follow_measures_of_a_slow_drifting_follower(robot):
     """70% of the commanded speed and a 0.05 rad/s unwanted turn: ratio 0.7, heading off."""
     script = [MotionSegment(10.0, 0.8, 0.0, 0.0)]
     xy, yaw = follow([MotionSegment(10.0, 0.8, 0.0, 0.05)], speed_scale=0.7)
-    (row,) = cf.follow_measures(make_trajectory(xy, yaw=yaw), script, robot, EVALUATE_PARAMS)
+    (row,) = cf.follow_measures(
+        make_trajectory(xy, yaw=yaw), script, robot, EVALUATE_PARAMS, CONTACT_PARAMS
+    )
     assert row["speed_ratio"] == pytest.approx(0.7, abs=1e-6)
     assert (row["vx"], row["vy"]) == pytest.approx((0.56, 0.0), abs=1e-6)  # heading frame
     assert row["yaw_rate"] == pytest.approx(0.05, abs=1e-9)
@@ -205,7 +208,9 @@ def test_follow_measures_reject_a_rollout_of_another_script(robot):
     from pimann.core.errors import PimannError
 
     with pytest.raises(PimannError, match="frames"):
-        cf.follow_measures(make_trajectory(np.zeros((100, 2))), SCRIPT, robot, EVALUATE_PARAMS)
+        cf.follow_measures(
+            make_trajectory(np.zeros((100, 2))), SCRIPT, robot, EVALUATE_PARAMS, CONTACT_PARAMS
+        )
 
 
 def test_drift_is_last_window_minus_first():
@@ -240,7 +245,7 @@ def test_a_stepping_gait_alternates_and_stands(robot):
     params = dataclasses.replace(load_params(), evaluate=EVALUATE_PARAMS)
     script = [StandSegment(1.0, True), MotionSegment(4.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
     trajectory = roll(GaitModel(robot), script, params, False, robot).trajectory
-    rows = cf.follow_measures(trajectory, script, robot, params.evaluate)
+    rows = cf.follow_measures(trajectory, script, robot, params.evaluate, params.contacts)
     walk = rows[1]
     assert walk["alternates"] is True
     assert min(walk["touchdowns_left"], walk["touchdowns_right"]) >= 3

@@ -34,7 +34,7 @@ BANDAI = "mocap:bandai_namco"
 def test_the_shared_folder_matches_the_manifest():
     groups = read_manifest()
     assert check_groups(groups.values()) == []
-    assert stage_problems((MOCAP, "robot", "simulation")) == []
+    assert stage_problems((MOCAP, "robot", "simulation"), load_params()) == []
     sources = load_params().data.sources
     assert {f"mocap:{key}" for key in sources} | {"robot", "simulation"} == set(groups)
     paths = {entry.path for group in groups.values() for entry in group.files}

@@ -26,7 +26,9 @@ def params():
 
 def test_a_sliding_clip_scores_its_speed_per_500_frames(params):
     # both feet in contact slide at 0.6 m/s: RMS over 3 components 0.6 / sqrt(3) every frame
-    row = clip_reference(walking_clip(0.6, 300, "a", contacts=False), params.evaluate)
+    row = clip_reference(
+        walking_clip(0.6, 300, "a", contacts=False), params.evaluate, params.contacts
+    )
     assert row["forward_frames"] == 300 and row["frames"] == 300
     expected = FRAMES * 0.6 / np.sqrt(3)
     for name in ("linear_position", "linear_position_world"):
@@ -39,7 +41,7 @@ def test_a_sliding_clip_scores_its_speed_per_500_frames(params):
 
 
 def test_only_forward_frames_count(params):
-    standing = clip_reference(walking_clip(0.0, 300, "s"), params.evaluate)
+    standing = clip_reference(walking_clip(0.0, 300, "s"), params.evaluate, params.contacts)
     assert standing["forward_frames"] == 0 and standing["support_rmse_linear_total"] is None
 
 

@@ -133,9 +133,9 @@ def test_sliding_is_the_evaluate_stage_metric(robot, params, rng):
     trajectory = make_trajectory(line(0.4, 0.2, n / RATE), yaw=0.2, contacts=contacts,
                                  joints=joints)  # fmt: skip
     frames = dr.clip_frames("clip", trajectory, params)
-    file = trajectory_metrics(trajectory, robot, params.evaluate)
+    file = trajectory_metrics(trajectory, robot, params.evaluate, params.contacts)
     detected = trajectory_metrics(
-        dataclasses.replace(trajectory, contacts=None), robot, params.evaluate
+        dataclasses.replace(trajectory, contacts=None), robot, params.evaluate, params.contacts
     )
     assert detected["contacts_source"] == "detected"
     for kind in ("linear", "angular"):

@@ -73,7 +73,7 @@ def test_results_record_provenance(params, tmp_path):
     summary = json.loads((tmp_path / "metrics_summary.json").read_text())
     assert summary["data_reference"] == REFERENCE
     assert summary["provenance"]["profile"] == params.profile
-    assert summary["provenance"]["params"]["figures"]["pi_weight"] == params.figures.pi_weight
+    assert summary["provenance"]["params"]["evaluate"]["pi_weight"] == params.evaluate.pi_weight
     text = (tmp_path / "claims.md").read_text()
     assert f"Profile **{params.profile}**" in text and '"profile": ' in text.splitlines()[1]
     assert text.count("| C") == len(claims) and "**holds**" in text
@@ -125,7 +125,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert len(frame) == 30 and set(frame["model"]) == {"w10", BASELINE}
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
     row = select_rows(frame, "short", True, model="w10", seed=1).iloc[0]
-    expected = trajectory_metrics(first, params=short.evaluate)
+    expected = trajectory_metrics(first, None, short.evaluate, short.contacts)
     assert row["support_rmse_linear_total"] == pytest.approx(
         expected["support_rmse_linear_total"], rel=1e-5
     )
@@ -189,7 +189,7 @@ def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
 
     missing = tmp_path / "nope.h5"
     with pytest.raises(PimannError, match="nope.h5: file not found"):
-        pool_map(_metrics_job, [(missing, params.evaluate)] * 2, 2, "metrics")
+        pool_map(_metrics_job, [(missing, params.evaluate, params.contacts)] * 2, 2, "metrics")
 
 
 def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp_path):

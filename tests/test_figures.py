@@ -16,9 +16,14 @@ from builders import (
 
 from pimann.core.params import load_params
 from pimann.core.robot import JOINT_NAMES
-from pimann.evaluate.figure_style import save_figure
-from pimann.evaluate.results import load_results
-from pimann.report.figures import FIGURES, fig_foot_heights, make_figures
+from pimann.report.figures import (
+    FIGURES,
+    draw,
+    fig_foot_heights,
+    load_results,
+    make_figures,
+    save_figure,
+)
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +34,7 @@ def params():
 def test_every_figure_is_written_with_provenance(params, tmp_path):
     results = crafted_results(tmp_path / "results", params)
     out = tmp_path / "figures"
-    written = make_figures(results, out, params.figures)
+    written = make_figures(results, out, params.figures, params.evaluate.pi_weight)
     assert set(written) == set(FIGURES)
     for name in FIGURES:
         pdf, png = (out / f"{name}.{fmt}" for fmt in ("pdf", "png"))
@@ -56,7 +61,7 @@ def test_missing_data_skips_the_figure(params, tmp_path, caplog):
     for path in (results / "timeseries").glob("feet_*.csv"):
         path.unlink()
     caplog.set_level(logging.INFO, logger="pimann.report.figures")
-    written = make_figures(results, tmp_path / "out", params.figures)
+    written = make_figures(results, tmp_path / "out", params.figures, params.evaluate.pi_weight)
     assert set(written) == set(FIGURES) - {"joint_tracking", "foot_rotations", "foot_heights"}
     assert "joint_tracking: no simulation traces" in caplog.text
 
@@ -97,8 +102,8 @@ def test_figures_follow_params(params, tmp_path):
 def test_legends_sit_outside_the_axes(params, tmp_path):
     """No legend inside an axes (they covered the data); one figure legend each instead."""
     results = load_results(crafted_results(tmp_path / "results", params))
-    for name, function in FIGURES.items():
-        fig = function(results, params.figures)
+    for name in FIGURES:
+        fig = draw(name, results, params.figures, params.evaluate.pi_weight)
         assert all(ax.get_legend() is None for ax in fig.axes), name
         assert len(fig.legends) == 1, name
 
@@ -120,7 +125,7 @@ def test_contact_shading_and_reference_trace_are_visible(params, tmp_path):
     heights = FIGURES["foot_heights"](results, params.figures)
     labels = [t.get_text() for t in heights.legends[0].get_texts()]
     assert labels == ["left", "right", "left in contact", "right in contact"]
-    tracking = FIGURES["joint_tracking"](results, params.figures)
+    tracking = FIGURES["joint_tracking"](results, params.figures, params.evaluate.pi_weight)
     order = {line.get_label(): line.get_zorder() for line in tracking.axes[0].get_lines()}
     assert order["reference"] > order["measured"]  # the reference is drawn over the measured
 
@@ -146,7 +151,7 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
             file[key] = source[key][()]
         file["joints_measured"] = source["joints_reference"][()] + 0.05  # tracks worse
         file.attrs["joint_names"] = list(JOINT_NAMES)
-    fig = FIGURES["joint_tracking"](load_results(root), params.figures)
+    fig = FIGURES["joint_tracking"](load_results(root), params.figures, params.evaluate.pi_weight)
     titles = [ax.get_title() for ax in fig.axes]
     assert len(titles) == 8 and titles[0].endswith(", offline") and titles[1].endswith(", online")
     assert "offline and online" in fig._suptitle.get_text()

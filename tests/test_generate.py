@@ -68,7 +68,7 @@ def test_gait_walks_forward_with_alternating_contacts(robot, params):
     np.testing.assert_allclose(heights[1:].min(axis=1), 0.0, atol=1e-9)
     # contacts from the streaming trigger equal the whole-trajectory detection
     np.testing.assert_array_equal(
-        trajectory.contacts, detect_contacts(robot, trajectory, params.evaluate)
+        trajectory.contacts, detect_contacts(robot, trajectory, params.contacts)
     )
     swings = [np.flatnonzero(np.diff(trajectory.contacts[:, f].astype(int)) == -1) for f in (0, 1)]
     assert min(len(s) for s in swings) >= 8  # ~one lift-off per foot and second
@@ -269,7 +269,7 @@ def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, 
         short.rollout,
         False,
         robot,
-        contact_params=params.evaluate,
+        contact_params=params.contacts,
     )
     np.testing.assert_allclose(again.joint_positions, trajectory.joint_positions, atol=1e-6)
 
@@ -296,7 +296,7 @@ def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
     scenario = [StandSegment(0.2, True), MotionSegment(1.0, 0.4, 0.0, 0.0), StandSegment(1.0, True)]
     rollout = generate_rollout(
         GaitModel(robot), LAYOUT, IDENTITY, scenario, params.rollout, False, robot,
-        contact_params=params.evaluate, standing=standing,
+        contact_params=params.contacts, standing=standing,
     )  # fmt: skip
     trajectory = rollout.trajectory
     np.testing.assert_array_equal(trajectory.joint_positions[0], joints)

@@ -11,7 +11,7 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from builders import EVALUATE_PARAMS
+from builders import CONTACT_PARAMS
 from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, load_params
@@ -90,7 +90,7 @@ def oracle_rollout(robot, clips, starts, variant, steps, joint_velocity_feedback
     )
     generator = BatchGenerator(
         torch.nn.Linear(n_in, n_out), layout, identity, rollout, np.zeros(len(clips), bool),
-        robot, EVALUATE_PARAMS, StandingPose.nominal(),
+        robot, CONTACT_PARAMS, StandingPose.nominal(),
     )  # fmt: skip
     generator.network = oracle = Oracle(rows)
     data_start(clips, starts, generator)

@@ -102,7 +102,7 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
     velocities = np.linspace(-1.0, 1.0, len(pose.joints))
     (rollout,) = generate_batch(
         model, layout, stats, [RolloutSpec([MotionSegment(1.0, 0.5, 0.0, 0.0)], False)],
-        params.rollout, contact_params=params.evaluate, standing=pose,
+        params.rollout, contact_params=params.contacts, standing=pose,
         start_joint_velocities=velocities,
     )  # fmt: skip
     np.testing.assert_array_equal(rollout.trajectory.joint_positions[0], pose.joints)

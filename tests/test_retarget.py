@@ -28,15 +28,13 @@ def params():
 
 def test_ik_recovers_joints_of_a_forward_kinematics_pose(robot, rng, params):
     # the inequalities (leg spread, feet spacing, shoulder roll) are off: a random pose may
-    # break them; a tiny posture cost keeps the optimum at the exact pose
+    # break them; a tiny posture cost keeps the optimum at the exact pose. The negative
+    # bounds are no values params.yaml allows: set past the params' validation
     ik_params = dataclasses.replace(
-        params.retarget,
-        posture_cost=1e-8,
-        min_leg_roll_spread=-10.0,
-        min_shoulder_roll=-10.0,
-        min_foot_spacing=-10.0,
-        gain_time_step=1.0 / params.retarget.segment_gain,
+        params.retarget, posture_cost=1e-8, gain_time_step=1.0 / params.retarget.segment_gain
     )
+    for name in ("min_leg_roll_spread", "min_shoulder_roll", "min_foot_spacing"):
+        object.__setattr__(ik_params, name, -10.0)
     margin = 0.05
     joints = np.clip(
         STANDING_JOINTS + rng.uniform(-0.3, 0.3, size=len(STANDING_JOINTS)),

@@ -3,7 +3,7 @@
 Generated trajectories carry no contact forces, so contact is inferred from geometry (SPEC 1):
 the lowest of the four sole corners (`SOLE_CORNERS`, in the sole frame) is compared with an
 on and an off height, and a switch happens only once its condition has held for
-`contact_switch_time`, so a foot grazing the threshold does not chatter. The same
+`switch_time` (params.yaml `contacts`), so a foot grazing the threshold does not chatter. The same
 `SchmittTrigger` serves the autoregressive generator (one step at a time) and whole
 trajectories (`contacts_from_heights`), so both always agree.
 
@@ -26,7 +26,7 @@ import numpy as np
 import pinocchio as pin
 
 from pimann.core.errors import PimannError, require_finite
-from pimann.core.params import EvaluateParams, load_params
+from pimann.core.params import ContactParams
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, SOLE_CORNERS, Robot, corner_offsets
 from pimann.core.trajectory import Trajectory
 
@@ -67,15 +67,9 @@ class SchmittTrigger:
 
     @classmethod
     def from_params(
-        cls, params: EvaluateParams, dt: float, initial: bool | np.ndarray | None = None
+        cls, params: ContactParams, dt: float, initial: bool | np.ndarray | None = None
     ) -> SchmittTrigger:
-        return cls(
-            params.contact_on_height,
-            params.contact_off_height,
-            params.contact_switch_time,
-            dt,
-            initial,
-        )
+        return cls(params.on_height, params.off_height, params.switch_time, dt, initial)
 
     @property
     def state(self) -> bool | np.ndarray | None:
@@ -109,11 +103,10 @@ class SchmittTrigger:
 def contacts_from_heights(
     heights: np.ndarray,
     dt: float,
-    params: EvaluateParams | None = None,
+    params: ContactParams,
     initial: bool | np.ndarray | None = None,
 ) -> np.ndarray:
     """Contact states (T, ...) bool from lowest-corner heights (T, ...), sample by sample."""
-    params = params or load_params().evaluate
     heights = np.asarray(heights, dtype=float)
     require_finite("<heights>", "foot heights", heights)
     trigger = SchmittTrigger.from_params(params, dt, initial)
@@ -209,9 +202,7 @@ def frame_period(trajectory: Trajectory) -> float:
     return float(np.median(steps))
 
 
-def detect_contacts(
-    robot: Robot, trajectory: Trajectory, params: EvaluateParams | None = None
-) -> np.ndarray:
+def detect_contacts(robot: Robot, trajectory: Trajectory, params: ContactParams) -> np.ndarray:
     """(T, 2) bool contacts (left, right) of a trajectory, by the Schmitt trigger above."""
     kinematics = foot_kinematics(robot, trajectory_configurations(robot, trajectory))
     return contacts_from_heights(kinematics.heights, frame_period(trajectory), params)

@@ -200,7 +200,7 @@ def _check_entry(entry: Entry, shared: Path) -> list[str]:
 
 def stage_problems(
     reads: Iterable[str],
-    params: Any | None = None,
+    params: Any,
     shared: Path | None = None,
     manifest: Path = MANIFEST,
 ) -> list[str]:
@@ -212,10 +212,6 @@ def stage_problems(
     problems: list[str] = []
     for name in reads:
         if name == MOCAP:
-            if params is None:
-                from pimann.core.params import load_params
-
-                params = load_params()
             for key, source in params.data.sources.items():
                 group = groups.get(f"{MOCAP_PREFIX}{key}")
                 if group is None or group.glob != source.path:

@@ -39,7 +39,10 @@ def stage_entry(
             logging.basicConfig(level=logging.INFO, format=LOG_FORMAT)
             started, clock = time.time(), time.perf_counter()
             try:
-                problems = _data_problems(reads)
+                from pimann.core.params import load_params
+
+                params = load_params()  # the data check's sources and the record's profile
+                problems = _data_problems(reads, params)
                 if problems:
                     for line in problems[:MAX_PROBLEM_LINES]:
                         print(line, file=sys.stderr)
@@ -48,7 +51,7 @@ def stage_entry(
                         print(f"... and {more} more: pimann check-data lists them", file=sys.stderr)
                     return 1
                 body(argv)
-                _record_time(started, time.perf_counter() - clock, times_dir)
+                _record_time(started, time.perf_counter() - clock, times_dir, params.profile)
             except PimannError as error:
                 print(error, file=sys.stderr)
                 return 1
@@ -59,15 +62,15 @@ def stage_entry(
     return wrap if body is None else wrap(body)
 
 
-def _data_problems(reads: tuple[str, ...]) -> list[str]:
+def _data_problems(reads: tuple[str, ...], params) -> list[str]:
     if not reads:
         return []
     from pimann.core.data_check import stage_problems
 
-    return stage_problems(reads)
+    return stage_problems(reads, params)
 
 
-def _record_time(started: float, wall_s: float, times_dir: Path | None) -> None:
+def _record_time(started: float, wall_s: float, times_dir: Path | None, profile: str) -> None:
     """The stage's record, when DVC runs it (a run by hand is no run of the pipeline)."""
     from pimann.core.stage_times import (
         GATHERING_STAGE,
@@ -81,9 +84,8 @@ def _record_time(started: float, wall_s: float, times_dir: Path | None) -> None:
     if not stage or stage == GATHERING_STAGE:
         log.info("done in %.1f s", wall_s)
         return
-    from pimann.core.params import load_params
     from pimann.core.paths import REPO_ROOT
 
-    record = stage_record(stage, started, wall_s, load_params().profile)
+    record = stage_record(stage, started, wall_s, profile)
     path = write_record(times_dir or REPO_ROOT / TIMES_DIR, record)
     log.info("%s done in %.1f s (%s)", stage, wall_s, path)

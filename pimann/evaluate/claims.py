@@ -56,11 +56,13 @@ __all__ = [
 def evaluate_claims(
     frame: pd.DataFrame,
     figures: FiguresParams,
+    pi_weight: float,
     representation: str = "local_world_aligned",
     pi_gradient: str = "both",
 ) -> list[Claim]:
     """Each claim of the paper's Sec. IV (SPEC 8) against our metrics, by the `RULES`.
 
+    `pi_weight`: evaluate.pi_weight, the featured PI model (drift and steering claims);
     `representation`: evaluate.foot_velocity_frame, the linear part of the sliding columns.
     """
     if frame.empty or not (frame["scenario"] == figures.scenario).any():
@@ -72,13 +74,13 @@ def evaluate_claims(
         _baseline_magnitude(data),
         *(_lower_than_baseline(data, figures, kind) for kind in ("linear", "angular")),
         _especially_angular(data, figures),
-        _decreasing_up_to(data, figures),
+        _decreasing_up_to(data, figures, pi_weight),
         _compared_walk(data, figures),
         *(_large_weight_walks(data, figures, steering) for steering in (False, True)),
         _foot_pitch_grows(data, figures, pi_gradient),
-        *(_steering_removes(data, figures, axis) for axis in ("y", "yaw")),
-        _pi_drifts_more(data, figures),
-        _steered_beats_baseline(data, figures),
+        *(_steering_removes(data, figures, pi_weight, axis) for axis in ("y", "yaw")),
+        _pi_drifts_more(data, figures, pi_weight),
+        _steered_beats_baseline(data, figures, pi_weight),
         _pi_reduces_foot_motion(data, figures),
     ]
 
@@ -181,10 +183,10 @@ def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
     return stands_still(data, claim, [(data.model(w), False) for w in figures.box_weights])
 
 
-def _decreasing_up_to(data: SeedData, figures: FiguresParams) -> Claim:
-    weights = sorted(w for w in figures.box_weights if w <= figures.pi_weight)
+def _decreasing_up_to(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+    weights = sorted(w for w in figures.box_weights if w <= pi_weight)
     claim = Claim(
-        "C5", f"Sliding decreases as w grows up to w={weight_label(figures.pi_weight)}",
+        "C5", f"Sliding decreases as w grows up to w={weight_label(pi_weight)}",
         "Sec. IV-C2, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
     )  # fmt: skip
     parts, orders = [], {}
@@ -294,9 +296,9 @@ def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) 
 DRIFT_METRIC = "max |lateral| / |yaw| drift of the base (poses)"
 
 
-def _steering_removes(data: SeedData, figures: FiguresParams, axis: str) -> Claim:
+def _steering_removes(data: SeedData, figures: FiguresParams, pi_weight: float, axis: str) -> Claim:
     metric = f"drift_{axis}_max_abs"
-    model = data.model(figures.pi_weight)
+    model = data.model(pi_weight)
     claim = Claim(
         "C10" if axis == "y" else "C11",
         f"Steering removes the {'lateral (y)' if axis == 'y' else 'yaw'} drift of the PI model",
@@ -305,12 +307,12 @@ def _steering_removes(data: SeedData, figures: FiguresParams, axis: str) -> Clai
     )  # fmt: skip
     free, steered = data.values(model, False, metric), data.values(model, True, metric)
     if not len(free) or not len(steered):
-        return missing(claim, f"w={weight_label(figures.pi_weight)} with and without steering")
+        return missing(claim, f"w={weight_label(pi_weight)} with and without steering")
     status = order(steered, figures.drift_reduction * free)
     unit = "m" if axis == "y" else "rad"
     claim = dataclasses.replace(
         claim, status=status,
-        ours=f"w={weight_label(figures.pi_weight)} max |{axis}| ({unit}): {span(free)} "
+        ours=f"w={weight_label(pi_weight)} max |{axis}| ({unit}): {span(free)} "
         f"without, {span(steered)} with steering",
         reason=f"steered {'seeds' if status == HOLDS else 'median'} "
         f"{'above' if status == FAILS else 'below'} {figures.drift_reduction:g} x the unsteered "
@@ -319,8 +321,8 @@ def _steering_removes(data: SeedData, figures: FiguresParams, axis: str) -> Clai
     return stands_still(data, claim, [(model, True)])
 
 
-def _drift_pairs(data: SeedData, figures: FiguresParams, steering: bool):
-    model = data.model(figures.pi_weight)
+def _drift_pairs(data: SeedData, figures: FiguresParams, pi_weight: float, steering: bool):
+    model = data.model(pi_weight)
     return {
         axis: (data.values(BASELINE, False, f"drift_{axis}_max_abs"),
                data.values(model, steering, f"drift_{axis}_max_abs"))
@@ -341,35 +343,35 @@ def _drift_claim(claim: Claim, pairs, label: str, orders: dict[str, str], word: 
     )  # fmt: skip
 
 
-def _pi_drifts_more(data: SeedData, figures: FiguresParams) -> Claim:
+def _pi_drifts_more(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
     claim = Claim(
         "C12", "Without steering the PI model drifts more than the baseline",
         "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (b)", "base_displacement",
         metric=DRIFT_METRIC,
     )  # fmt: skip
-    pairs = _drift_pairs(data, figures, False)
+    pairs = _drift_pairs(data, figures, pi_weight, False)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the PI model")
     orders = {a: order(b, p) for a, (b, p) in pairs.items()}
-    label = f"w={weight_label(figures.pi_weight)}"
+    label = f"w={weight_label(pi_weight)}"
     return stands_still(
         data, _drift_claim(claim, pairs, label, orders, "larger"), [(BASELINE, False)]
     )
 
 
-def _steered_beats_baseline(data: SeedData, figures: FiguresParams) -> Claim:
+def _steered_beats_baseline(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
     claim = Claim(
         "C13", "With steering the PI model deviates less from the walking direction than the "
         "baseline", "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (c)",
         "base_displacement", metric=DRIFT_METRIC,
     )  # fmt: skip
-    pairs = _drift_pairs(data, figures, True)
+    pairs = _drift_pairs(data, figures, pi_weight, True)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the steered PI model")
     orders = {a: order(p, b) for a, (b, p) in pairs.items()}
-    label = f"w={weight_label(figures.pi_weight)} steered"
+    label = f"w={weight_label(pi_weight)} steered"
     claim = _drift_claim(claim, pairs, label, orders, "smaller")
-    return stands_still(data, claim, [(data.model(figures.pi_weight), True)])
+    return stands_still(data, claim, [(data.model(pi_weight), True)])
 
 
 def _pi_reduces_foot_motion(data: SeedData, figures: FiguresParams) -> Claim:

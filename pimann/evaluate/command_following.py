@@ -14,8 +14,8 @@ state, the last frame of segment i - 1, to its last frame):
   commanded yaw rate times the time since), final (signed) and largest (absolute), deg;
 - touchdowns per foot and whether the feet alternate (counts differ by at most 1; on a motion
   command at least one, and one each in a segment of two strides or more), under the
-  evaluate stage's contact rule (the Schmitt trigger of pimann.core.contacts with
-  `evaluate.contact_*`, applied to the trajectory's geometry whatever
+  shared contact rule (params.yaml `contacts`, the Schmitt trigger of pimann.core.contacts),
+  applied to the trajectory's geometry whatever
   flags the file carries: for a rollout these are the generator's own flags, same rule);
 - support-foot sliding: pimann.evaluate.metrics' per-frame RMS of the sole velocity where in contact
   (`trajectory_time_series`, the same numbers the paper's total RMSE sums), left and right
@@ -45,7 +45,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann.core.contacts import frame_period, touchdowns
 from pimann.core.errors import PimannError
-from pimann.core.params import EvaluateParams, Segment, StandSegment
+from pimann.core.params import ContactParams, EvaluateParams, Segment, StandSegment
 from pimann.core.robot import Robot
 from pimann.core.rotations import yaw_of
 from pimann.core.trajectory import Trajectory
@@ -120,6 +120,7 @@ def follow_measures(
     script: Sequence[Segment],
     robot: Robot,
     evaluate_params: EvaluateParams,
+    contact_params: ContactParams,
     *,
     settle_s: float | None = None,
 ) -> list[dict[str, Any]]:
@@ -132,7 +133,7 @@ def follow_measures(
             f"has {len(rollout)} frames, a rollout of the script has {bounds[-1][1] + 1}",
         )
     series = trajectory_time_series(
-        dataclasses.replace(rollout, contacts=None), robot, evaluate_params
+        dataclasses.replace(rollout, contacts=None), robot, evaluate_params, contact_params
     )  # contacts by the evaluate rule from the geometry
     position = np.asarray(rollout.base_position, dtype=float)[:, :2]
     yaw = np.unwrap(yaw_of(Rotation.from_quat(rollout.base_quaternion_xyzw).as_matrix()))

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from pimann.core.parallel import pool_map
-from pimann.core.params import EvaluateParams, Params
+from pimann.core.params import ContactParams, EvaluateParams, Params
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory, iter_collection
 from pimann.evaluate.metrics import SLIDING, aggregate, sliding_frames
@@ -44,9 +44,12 @@ METRICS = (
 )
 
 
-def clip_reference(trajectory: Trajectory, params: EvaluateParams) -> dict[str, Any]:
+def clip_reference(
+    trajectory: Trajectory, params: EvaluateParams, contacts: ContactParams
+) -> dict[str, Any]:
     """One clip: its forward frames and every sliding total over them, per `FRAMES` frames."""
-    sliding = sliding_frames(trajectory, load_robot("retarget"), params, file_contacts=False)
+    robot = load_robot("retarget")
+    sliding = sliding_frames(trajectory, robot, params, contacts, file_contacts=False)
     forward = np.asarray(CLASSES)[motion_classes(trajectory)] == "forward"
     row: dict[str, Any] = {
         "frames": len(forward),
@@ -62,7 +65,7 @@ def clip_reference(trajectory: Trajectory, params: EvaluateParams) -> dict[str, 
     return row
 
 
-def _job(job: tuple[Trajectory, EvaluateParams]) -> dict[str, Any]:
+def _job(job: tuple[Trajectory, EvaluateParams, ContactParams]) -> dict[str, Any]:
     return clip_reference(*job)
 
 
@@ -86,7 +89,7 @@ def data_reference(
     if len(set(sources)) >= 2:
         features = params.features
         test = split_sources([t for _, t in clips], features.test_fraction, features.split_seed)
-    jobs = [(t, params.evaluate) for _, t in clips]
+    jobs = [(t, params.evaluate, params.contacts) for _, t in clips]
     rows = pool_map(_job, jobs, workers, "data reference")
     return {
         "label": LABEL,

@@ -14,8 +14,8 @@ generated trajectories is applied here, with the same functions and contact rule
 - Support-foot sliding (pimann.evaluate.metrics' velocity level, the joints' differences moving the
   feet with the lower one held: RMS over the 3 linear / 3 angular components of the sole
   velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
-  right sums averaged) with the evaluate stage's contact rule (the Schmitt trigger of
-  pimann.core.contacts on the lowest sole corner, `evaluate.contact_*`) and with the file's own
+  right sums averaged) with the shared contact rule (params.yaml `contacts`, the Schmitt
+  trigger of pimann.contacts on the lowest sole corner) and with the file's own
   flags. A sum grows with the frames, so it is scaled as the paper's 10 s test: the mean per
   frame times `PAPER_FRAMES` (500 frames, 10 s at 50 Hz). Per motion class it is restricted to
   the frames of that class (frames whose 1 s window is, e.g., forward walking), where the class
@@ -159,7 +159,9 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
     robot = load_robot("retarget")
     time = np.asarray(trajectory.time, dtype=float)
     dt = frame_period(trajectory)
-    analysis = analyse(trajectory, robot, params.evaluate, file_contacts=False)  # as evaluated
+    analysis = analyse(
+        trajectory, robot, params.evaluate, params.contacts, file_contacts=False
+    )  # as evaluated
     rms = {kind: analysis.rms(kind) for kind in ("linear", "angular")}
     contacts = {"evaluate_rule": analysis.contacts}
     if trajectory.contacts is not None:
@@ -333,6 +335,7 @@ def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -
         "profile": params.profile,
         "params": {
             "data": as_dict(params.data),
+            "contacts": as_dict(params.contacts),
             "evaluate": as_dict(params.evaluate),
             "features": {
                 "window": params.features.window,

@@ -91,8 +91,9 @@ def _metrics_job(job: tuple[Path, Any]) -> dict[str, Any]:
     from pimann.core.trajectory import read_trajectory
     from pimann.evaluate.metrics import trajectory_metrics
 
-    path, evaluate_params = job
-    return trajectory_metrics(read_trajectory(path), load_robot("retarget"), evaluate_params)
+    path, evaluate_params, contact_params = job
+    robot = load_robot("retarget")
+    return trajectory_metrics(read_trajectory(path), robot, evaluate_params, contact_params)
 
 
 def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) -> pd.DataFrame:
@@ -100,7 +101,10 @@ def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) 
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
     results = pool_map(
-        _metrics_job, [(path, params.evaluate) for _, path in rollouts], workers, "metrics"
+        _metrics_job,
+        [(path, params.evaluate, params.contacts) for _, path in rollouts],
+        workers,
+        "metrics",
     )
     rows = [
         {**columns, **{k: v for k, v in metrics.items() if k != "source"}}
@@ -160,7 +164,9 @@ def representative_seed(
     return int(rows.assign(_d=distance).sort_values(["_d", "seed"])["seed"].iloc[0])
 
 
-def timeseries_selection(frame: pd.DataFrame, figures: FiguresParams) -> dict[str, RolloutKey]:
+def timeseries_selection(
+    frame: pd.DataFrame, figures: FiguresParams, pi_weight: float
+) -> dict[str, RolloutKey]:
     """{csv name: rollout} of the figures' time series: drift (3 conditions), feet per w."""
     scenario = figures.scenario
     models = pi_models(frame)
@@ -168,7 +174,7 @@ def timeseries_selection(frame: pd.DataFrame, figures: FiguresParams) -> dict[st
     seed = representative_seed(frame, BASELINE, scenario, False)
     if seed is not None:
         chosen["base_baseline"] = RolloutKey(BASELINE, seed, scenario, False)
-    focus = models.get(float(figures.pi_weight))
+    focus = models.get(float(pi_weight))
     seed = None if focus is None else representative_seed(frame, focus, scenario, False)
     if seed is not None:
         chosen["base_pi"] = RolloutKey(focus, seed, scenario, False)
@@ -195,7 +201,10 @@ def write_timeseries(
         tmp.mkdir()
         for name, key in track(selection.items(), "time series", "series", logger=log):
             series = trajectory_time_series(
-                read_trajectory(rollout_path(rollouts_dir, key)), robot, params.evaluate
+                read_trajectory(rollout_path(rollouts_dir, key)),
+                robot,
+                params.evaluate,
+                params.contacts,
             )
             columns = BASE_COLUMNS if name.startswith("base_") else FOOT_COLUMNS
             table = series[columns].copy()
@@ -231,7 +240,8 @@ def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[s
         "pi_weights": list(params.train.pi_weights),
         "scenario": params.figures.scenario,
         "params": {
-            name: as_dict(getattr(params, name)) for name in ("rollout", "evaluate", "figures")
+            name: as_dict(getattr(params, name))
+            for name in ("rollout", "contacts", "evaluate", "figures")
         },
         "models": models,
         "rollout_failures": failed,
@@ -256,7 +266,11 @@ def write_results(
     with atomic_path(results_dir / "metrics.csv") as tmp:
         tidy.to_csv(tmp, index=False, float_format="%.6g")
     claims = evaluate_claims(
-        frame, params.figures, params.evaluate.foot_velocity_frame, params.train.pi_gradient
+        frame,
+        params.figures,
+        params.evaluate.pi_weight,
+        params.evaluate.foot_velocity_frame,
+        params.train.pi_gradient,
     )
     summary = {
         "provenance": info,
@@ -289,7 +303,7 @@ def evaluate_all(
     from pimann.evaluate.following import collect_following, write_following
 
     frame = collect_metrics(rollouts_dir, params, workers)
-    selection = timeseries_selection(frame, params.figures)
+    selection = timeseries_selection(frame, params.figures, params.evaluate.pi_weight)
     write_timeseries(rollouts_dir, Path(results_dir) / "timeseries", selection, params)
     name = params.features.input if data is None else data
     reference = data_reference(REPO_ROOT / name, params, workers, str(name))

@@ -88,7 +88,9 @@ def _rollout_displacement(trajectory) -> np.ndarray:
 
 def measure(trajectory, script: Sequence[cf.Segment], params: Params) -> list[dict[str, Any]]:
     """`follow_measures` rows of one trajectory, with its and the script's displacement."""
-    rows = cf.follow_measures(trajectory, script, load_robot("retarget"), params.evaluate)
+    rows = cf.follow_measures(
+        trajectory, script, load_robot("retarget"), params.evaluate, params.contacts
+    )
     achieved = _rollout_displacement(trajectory)
     commanded = script_displacement(script, float(trajectory.rate_hz))
     extra = {

@@ -49,7 +49,7 @@ from pimann.core.contacts import (
     trajectory_configurations,
 )
 from pimann.core.errors import PimannError, about
-from pimann.core.params import EvaluateParams, load_params
+from pimann.core.params import ContactParams, EvaluateParams
 from pimann.core.robot import Robot, load_robot
 from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
@@ -161,7 +161,11 @@ def _check_time(trajectory: Trajectory) -> np.ndarray:
 
 
 def analyse(
-    trajectory: Trajectory, robot: Robot, params: EvaluateParams, file_contacts: bool = True
+    trajectory: Trajectory,
+    robot: Robot,
+    params: EvaluateParams,
+    contacts: ContactParams,
+    file_contacts: bool = True,
 ) -> Analysis:
     """Both levels' sole velocities, contacts (the file's flags, unless `file_contacts` is off
     or there are none: the evaluate rule) and base drift of one trajectory."""
@@ -179,12 +183,13 @@ def analyse(
     feet.velocities = in_representation(
         levels["velocity"], feet.positions, params.foot_velocity_frame
     )
-    dt = frame_period(trajectory)
+    dt, rule = frame_period(trajectory), contacts
     if file_contacts and trajectory.contacts is not None:
         contacts, contacts_source = np.asarray(trajectory.contacts, dtype=bool), "file"
     else:
-        contacts, contacts_source = contacts_from_heights(feet.heights, dt, params), "detected"
-    origin_contacts = contacts_from_heights(feet.positions[..., 2], dt, params)
+        detected = contacts_from_heights(feet.heights, dt, rule)
+        contacts, contacts_source = detected, "detected"
+    origin_contacts = contacts_from_heights(feet.positions[..., 2], dt, rule)
     displacement, angles = base_drift(trajectory)
     return Analysis(
         time, feet, levels, params.foot_velocity_frame, contacts, origin_contacts,
@@ -194,8 +199,9 @@ def analyse(
 
 def sliding_frames(
     trajectory: Trajectory,
-    robot: Robot | None = None,
-    params: EvaluateParams | None = None,
+    robot: Robot | None,
+    params: EvaluateParams,
+    contacts: ContactParams,
     file_contacts: bool = True,
 ) -> dict[str, np.ndarray]:
     """{`SLIDING` name: (T, 2) contact-masked per-frame RMS}, plus "contacts" (T, 2).
@@ -204,8 +210,7 @@ def sliding_frames(
     detects the contacts by the evaluate rule even where the file has its own.
     """
     robot = robot or load_robot("retarget")
-    params = params or load_params().evaluate
-    a = analyse(trajectory, robot, params, file_contacts)
+    a = analyse(trajectory, robot, params, contacts, file_contacts)
     out = {name: np.where(a.contacts_of(name), a.rms(name), 0.0) for name in SLIDING}
     out["contacts"] = a.contacts
     return out
@@ -229,12 +234,11 @@ def _joint_velocity_gap(trajectory: Trajectory, time: np.ndarray) -> float | Non
 
 
 def trajectory_metrics(
-    trajectory: Trajectory, robot: Robot | None = None, params: EvaluateParams | None = None
+    trajectory: Trajectory, robot: Robot | None, params: EvaluateParams, contacts: ContactParams
 ) -> dict[str, Any]:
     """The paper's metrics of one trajectory, as JSON-serialisable scalars (None: undefined)."""
     robot = robot or load_robot("retarget")
-    params = params or load_params().evaluate
-    a = analyse(trajectory, robot, params)
+    a = analyse(trajectory, robot, params, contacts)
     contacts = a.contacts
     metrics: dict[str, Any] = {
         "source": trajectory.source,
@@ -281,12 +285,11 @@ def trajectory_metrics(
 
 
 def trajectory_time_series(
-    trajectory: Trajectory, robot: Robot | None = None, params: EvaluateParams | None = None
+    trajectory: Trajectory, robot: Robot | None, params: EvaluateParams, contacts: ContactParams
 ) -> pd.DataFrame:
     """Per-frame drift, foot heights, pitches, contacts and sliding, one row per frame."""
     robot = robot or load_robot("retarget")
-    params = params or load_params().evaluate
-    a = analyse(trajectory, robot, params)
+    a = analyse(trajectory, robot, params, contacts)
     columns: dict[str, np.ndarray] = {"time": a.time - a.time[0]}
     for k, name in enumerate(("base_x", "base_y", "base_z")):
         columns[name] = a.displacement[:, k]
@@ -341,7 +344,7 @@ def aggregate(
 
 
 def metrics_for_file(
-    path: str | Path, robot: Robot | None = None, params: EvaluateParams | None = None
+    path: str | Path, robot: Robot | None, params: EvaluateParams, contacts: ContactParams
 ) -> dict[str, Any]:
     """`pimann metrics FILE`: the metrics of the file's trajectory, or {group: metrics} for a
     collection file."""
@@ -354,11 +357,11 @@ def metrics_for_file(
         pass  # read_trajectory raises the proper PimannError below
     if not is_collection:
         with about(path):
-            return trajectory_metrics(read_trajectory(path), robot, params)
+            return trajectory_metrics(read_trajectory(path), robot, params, contacts)
     result = {}
     for name, trajectory in iter_collection(path):
         with about(path, f"group {name!r}"):
-            result[name] = trajectory_metrics(trajectory, robot, params)
+            result[name] = trajectory_metrics(trajectory, robot, params, contacts)
     if not result:
         raise PimannError(path, "holds no trajectory")
     return result

@@ -27,7 +27,7 @@ import torch
 
 from pimann.core.contacts import SchmittTrigger
 from pimann.core.errors import PimannError
-from pimann.core.params import EvaluateParams, RolloutParams
+from pimann.core.params import ContactParams, RolloutParams
 from pimann.core.robot import Robot
 from pimann.core.rotations import (
     exp_so3,
@@ -111,7 +111,7 @@ class BatchGenerator:
         params: RolloutParams,
         steering: np.ndarray,
         robot: Robot,
-        contact_params: EvaluateParams,
+        contact_params: ContactParams,
         standing: StandingPose,
     ):
         rows = len(steering)
@@ -210,7 +210,7 @@ class BatchGenerator:
             self.rotation, self.joints, np.array(position, float)
         )
         self.trigger = SchmittTrigger.from_params(
-            self.contact_params, self.dt, heights <= self.contact_params.contact_on_height
+            self.contact_params, self.dt, heights <= self.contact_params.on_height
         )
         self.contacts = self.trigger.state
         self.stopped[:] = False

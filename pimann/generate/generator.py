@@ -78,11 +78,10 @@ from threadpoolctl import ThreadpoolController
 from pimann.core.errors import PimannError
 from pimann.core.params import (
     DEFAULT_PARAMS,
-    EvaluateParams,
+    ContactParams,
     Params,
     RolloutParams,
     Segment,
-    load_params,
 )
 from pimann.core.paths import repo_relative
 from pimann.core.robot import Robot, load_robot
@@ -128,7 +127,7 @@ def generate_batch(
     params: RolloutParams,
     robot: Robot | None = None,
     *,
-    contact_params: EvaluateParams | None = None,
+    contact_params: ContactParams,
     standing: StandingPose | None = None,
     start_joint_velocities: np.ndarray | None = None,
     timings: dict[str, float] | None = None,
@@ -145,7 +144,7 @@ def generate_batch(
     plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
     generator = BatchGenerator(
         model, layout, stats, params, np.array([spec.steering for spec in specs]),
-        robot or load_robot(), contact_params or load_params().evaluate,
+        robot or load_robot(), contact_params,
         standing or StandingPose.nominal(),
     )  # fmt: skip
     if start_joint_velocities is not None:
@@ -208,7 +207,7 @@ def generate_rollout(
     steering: bool,
     robot: Robot | None = None,
     *,
-    contact_params: EvaluateParams | None = None,
+    contact_params: ContactParams,
     source: str = "generated",
     attrs: dict | None = None,
     standing: StandingPose | None = None,
@@ -303,7 +302,7 @@ def _model_rollouts(
         ]  # fmt: skip
         rollouts = generate_batch(
             model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.evaluate, standing=standing,
+            contact_params=params.contacts, standing=standing,
         )  # fmt: skip
         yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 
@@ -327,8 +326,8 @@ def generate_file(
     model_dir: str | Path,
     scenario_name: str,
     output_path: str | Path,
-    steering: bool = True,
-    params: Params | None = None,
+    steering: bool,
+    params: Params,
     params_path: str | Path = DEFAULT_PARAMS,
     segments: Sequence[Segment] | None = None,
 ) -> Trajectory:
@@ -338,7 +337,6 @@ def generate_file(
     rollout.scenarios); recorded in the file's attrs["script"]
     (pimann.generate.rollouts.script_json).
     """
-    params = params or load_params(params_path)
     if segments is None:
         scenario = scenario_of(params.rollout, scenario_name, params_path)
     else:

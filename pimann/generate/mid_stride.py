@@ -130,7 +130,7 @@ def sustainment(
     for seed, folder in model_seeds(models_dir).items():
         model, layout, stats, meta = load_model(folder)
         roll = functools.partial(generate_batch, model, layout, stats, params=params.rollout,
-                                 contact_params=params.evaluate)  # fmt: skip
+                                 contact_params=params.contacts)  # fmt: skip
         # from standing: every clip's command in one batch; from mid-stride: one start each
         standing = StandingPose.from_json(meta.get("standing"))
         specs = [RolloutSpec([start[2]], steering) for start in starts]

@@ -84,7 +84,7 @@ def forced_rollouts(
     rollout = dataclasses.replace(params.rollout, command_blend_tau=None)
     generator = BatchGenerator(
         model, layout, stats, rollout, np.zeros(len(MODES), bool), load_robot(),
-        params.evaluate, StandingPose.nominal(),
+        params.contacts, StandingPose.nominal(),
     )  # fmt: skip
     xs = layout.x_slices
     columns = np.r_[xs["base_linear_window"], xs["base_angular_window"]]

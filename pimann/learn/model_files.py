@@ -11,9 +11,10 @@ import warnings
 from pathlib import Path
 
 import torch
+from pydantic import ValidationError
 
 from pimann.core.errors import PimannError, about
-from pimann.core.params import ModelParams
+from pimann.core.params import ModelParams, validation_problem
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.mann import MANN
 
@@ -115,6 +116,8 @@ def load_model(
     try:
         model_params = ModelParams(**blob["model_params"])
         model = MANN(*dims, model_params, ensemble=1, seeds=[meta["seed"]])
+    except ValidationError as error:
+        raise PimannError(path, f"model_params: {validation_problem(error)}") from None
     except (TypeError, ValueError, RuntimeError) as error:
         raise PimannError(path, f"model_params: {error}") from None
     weights, expected = blob["state_dict"], model.state_dict()

@@ -115,13 +115,16 @@ class _State:
 
 def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params: Params) -> str:
     """What a checkpoint must match to be resumed (the epoch count may grow)."""
-    train = dataclasses.replace(
-        params.train, epochs=0, eval_batch_size=0, device="auto", threads="auto", workers=0
-    )  # what does not change the result
+    train = {
+        **as_dict(params.train),
+        "epochs": 0,
+        "eval_batch_size": 0,
+        "device": "auto",
+        "threads": "auto",
+        "workers": 0,
+    }  # what does not change the result
     digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
-    blob = json.dumps(
-        [digest, pi_weight, seeds, as_dict(params.model), as_dict(train)], sort_keys=True
-    )
+    blob = json.dumps([digest, pi_weight, seeds, as_dict(params.model), train], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 

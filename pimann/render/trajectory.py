@@ -23,6 +23,7 @@ import pinocchio as pin
 
 from pimann.core.contacts import detect_contacts, trajectory_configurations
 from pimann.core.errors import PimannError
+from pimann.core.params import ContactParams
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, SEGMENTS, SOLE_CORNERS, Robot, load_robot
 from pimann.core.trajectory import Trajectory
 from pimann.render.picture_files import FORMATS, STRIP_COLUMNS, check_output, write_pictures
@@ -88,9 +89,13 @@ def _side_colour(name: str) -> str:
 
 
 def robot_skeleton(
-    trajectory: Trajectory, frames: np.ndarray, robot: Robot | None = None
+    trajectory: Trajectory,
+    frames: np.ndarray,
+    robot: Robot | None = None,
+    contacts: ContactParams | None = None,
 ) -> Skeleton:
-    """Joint origins, sole rectangles, hands and head top of the robot at `frames`."""
+    """Joint origins, sole rectangles, hands and head top of the robot at `frames`; the soles'
+    contacts are the file's, else detected by the `contacts` rule (params.yaml `contacts`)."""
     robot = robot or load_robot("retarget")
     model = robot.model
     data = model.createData()  # private: the cached Robot's data may be in use elsewhere
@@ -128,10 +133,13 @@ def robot_skeleton(
         for side, fid in enumerate(sole_ids):
             placement = data.oMf[fid]
             feet[n, side] = FOOT_CORNERS @ placement.rotation.T + placement.translation
+    rule = contacts
     if trajectory.contacts is not None:
         contacts = np.asarray(trajectory.contacts, dtype=bool)[frames]
-    else:  # the evaluation's own detector, so the picture agrees with the metrics
-        contacts = detect_contacts(robot, trajectory)[frames]
+    elif rule is not None:  # the evaluation's own detector, so the picture agrees with the metrics
+        contacts = detect_contacts(robot, trajectory, rule)[frames]
+    else:
+        raise PimannError(trajectory.source, "has no contact flags and no contact rule is given")
     return Skeleton(
         title="ergoCub",
         points=points,
@@ -213,6 +221,7 @@ def render_trajectory(
     strip_frames: int = STRIP_FRAMES,
     strip_columns: int = STRIP_COLUMNS,
     robot: Robot | None = None,
+    contacts: ContactParams | None = None,
 ) -> Path:
     """Draw the robot (and the person beside it) to a .gif, .mp4 or .png strip.
 
@@ -220,7 +229,7 @@ def render_trajectory(
     the clip, played at `fps` (default: real time), each `width` x `height` (960 x 480). A PNG
     is `strip_frames` evenly spaced frames in rows of `strip_columns`, each 480 x 320 unless
     given. `human` may be at another rate: frames are matched by time. Either subject may be
-    None.
+    None. `contacts`: the contact rule of a trajectory without contact flags.
     """
     output_path = Path(output_path)
     suffix = check_output(output_path)
@@ -248,7 +257,7 @@ def render_trajectory(
     times = clock[frames]
     skeletons = []
     if trajectory is not None:
-        skeletons.append(robot_skeleton(trajectory, frames, robot))
+        skeletons.append(robot_skeleton(trajectory, frames, robot, contacts))
     if human is not None:
         skeletons.append(human_skeleton(human, match_frames(times, human.time)))
     scene = Scene(skeletons, times - clock[0], width, height)

@@ -246,7 +246,7 @@ def _read_sim(path: Path) -> dict[str, np.ndarray] | None:
     return out
 
 
-def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_joint_tracking(results: Results, figures: FiguresParams, pi_weight: float) -> Figure | None:
     """Fig. joint_plots: selected upper-body joints, generated / reference / measured, in sim."""
     files = sorted((results.root / "sim").glob("*.h5")) + sorted(
         (results.root / "sim").glob("*.csv")
@@ -258,7 +258,7 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     # the paper's run: the featured PI model's steered mixed scenario, else any mixed run,
     # under the offline controller; its online twin (`<name>-online`) beside it if there is one
     offline = [(p, d) for p, d in runs if not p.stem.endswith("-online")] or runs
-    featured = f"w{figures.pi_weight:g}-"
+    featured = f"w{pi_weight:g}-"
     mixed = [(p, d) for p, d in offline if "mixed" in p.stem]
     path, data = next(
         (
@@ -302,7 +302,8 @@ def fig_joint_tracking(results: Results, figures: FiguresParams) -> Figure | Non
     return fig
 
 
-FIGURES: dict[str, Callable[[Results, FiguresParams], Figure | None]] = {
+# (results, figures[, pi_weight]): the joint-tracking figure shows the featured PI model's run
+FIGURES: dict[str, Callable[..., Figure | None]] = {
     "pi_weight_comparison": fig_pi_weight_comparison,
     "base_displacement": fig_base_displacement,
     "ground_projection": fig_ground_projection,
@@ -312,15 +313,23 @@ FIGURES: dict[str, Callable[[Results, FiguresParams], Figure | None]] = {
 }
 
 
+def draw(name: str, results: Results, figures: FiguresParams, pi_weight: float) -> Figure | None:
+    """The figure `name` of FIGURES; the joint-tracking one shows the featured PI model's run
+    (`pi_weight`: evaluate.pi_weight)."""
+    extra = {"pi_weight": pi_weight} if name == "joint_tracking" else {}
+    return FIGURES[name](results, figures, **extra)
+
+
 def make_figures(
-    results_dir: str | Path, out_dir: str | Path, figures: FiguresParams
+    results_dir: str | Path, out_dir: str | Path, figures: FiguresParams, pi_weight: float
 ) -> dict[str, list[Path]]:
-    """Every figure whose data exists under `results_dir`, into `out_dir` as PDF and PNG."""
+    """Every figure whose data exists under `results_dir`, into `out_dir` as PDF and PNG;
+    `pi_weight`: the featured PI model (evaluate.pi_weight)."""
     results = load_results(results_dir)
     written: dict[str, list[Path]] = {}
     with matplotlib.rc_context(style(figures)):
-        for name, function in FIGURES.items():
-            fig = function(results, figures)
+        for name in FIGURES:
+            fig = draw(name, results, figures, pi_weight)
             if fig is None:
                 continue
             written[name] = save_figure(fig, out_dir, name, results.provenance)

@@ -13,7 +13,7 @@ and stable from run to run (a value that cannot be had is null):
 - `<scenario>.<model>.<metric>`: medians over the seeds, unsteered, on figures.scenario (the
   paper's forward walk): sliding (support-foot total RMSE, linear and angular) and the share
   of seeds that walk; and the base drift (max |y|, max |yaw|) of the baseline and the featured
-  PI model (figures.pi_weight), unsteered and steered;
+  PI model (evaluate.pi_weight), unsteered and steered;
 - `data.sliding_linear`, `data.sliding_angular`: the retargeted data's own level;
 - `following.<model>.<steering>`: the share of motion classes whose every criterion passes
   (pimann.evaluate.command_following), on the held-out split, and `following.data` for the test
@@ -93,8 +93,8 @@ def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
         rows = select_rows(frame, scenario, False, model=model)
         for key, column in HEADLINE.items():
             out[f"{scenario}.{model}.{key}"] = _median(rows, column)
-    featured = pi_models(frame).get(float(params.figures.pi_weight)) if len(frame) else None
-    label = f"w{weight_label(params.figures.pi_weight)}"
+    featured = pi_models(frame).get(float(params.evaluate.pi_weight)) if len(frame) else None
+    label = f"w{weight_label(params.evaluate.pi_weight)}"
     for model, name in ((BASELINE, BASELINE), (featured, label)):
         for steering in (False, True):
             rows = select_rows(frame, scenario, steering, model=model) if model else frame[:0]
