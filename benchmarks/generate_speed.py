@@ -32,16 +32,16 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from pimann.batch_generate import SECTIONS
-from pimann.benchmark_clips import benchmark_scripts
-from pimann.command_script import scenario_steps
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.generate import RolloutSpec, generate_batch, generate_rollout
-from pimann.mann import MANN
-from pimann.params import MotionSegment, StandSegment, load_params
-from pimann.paths import REPO_ROOT
-from pimann.robot import STANDING_BASE_HEIGHT, STANDING_JOINTS, load_robot
-from pimann.trajectory import write_trajectory
+from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import STANDING_BASE_HEIGHT, STANDING_JOINTS, load_robot
+from pimann.core.trajectory import write_trajectory
+from pimann.generate.batch_generate import SECTIONS
+from pimann.generate.benchmark_clips import benchmark_scripts
+from pimann.generate.command_script import scenario_steps
+from pimann.generate.generator import RolloutSpec, generate_batch, generate_rollout
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.mann import MANN
 
 SECONDS = 10.0
 N_CLIPS = 12
@@ -113,7 +113,7 @@ def sections(
         start = time.perf_counter()
         rollouts = generate_batch(
             model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.evaluate, timings=timings,
+            contact_params=params.contacts, timings=timings,
         )  # fmt: skip
         wall = time.perf_counter() - start
         with tempfile.TemporaryDirectory() as folder:
@@ -143,7 +143,7 @@ def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3
     models = [random_model(params, layout, seed) for seed in (0, 1)]
     jobs = [(script, steering) for script in scripts for steering in (False, True)]
     frames = sum(len(scenario_steps(script, layout.rate_hz)) for script, _ in jobs)
-    kwargs = {"contact_params": params.evaluate}
+    kwargs = {"contact_params": params.contacts}
 
     def one_at_a_time() -> None:
         for model in models:

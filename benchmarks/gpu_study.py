@@ -1,12 +1,12 @@
 """The study on one accelerator: step times, the paper-size sweep projected, and a training.
 
-1. The PI training step (L_D + 10 L_B, AdamW as pimann.train builds it) of the 5-seed
+1. The PI training step (L_D + 10 L_B, AdamW as pimann.learn.train builds it) of the 5-seed
    ensemble at the paper's batch (train.batch_size), in float32 and, where the device has
    it, bfloat16; also the plain step of w = 0 and of the single baseline model.
 2. The paper-size sweep projected from them: 26 models (5 PI weights x 5 seeds as one
    ensemble each, w = 0 without L_B, and the ground-projected baseline), 150 epochs over
    every clip (254k training samples, as benchmarks.train_step counts them).
-3. The largest real training (pimann.train.train_models, 5 seeds, w = 10) that fits
+3. The largest real training (pimann.learn.train.train_models, 5 seeds, w = 10) that fits
    `--budget-s`: every training sample of `--dataset` and as many epochs as the measured
    step time allows (at most train.epochs), with its wall time against the projection.
 
@@ -32,15 +32,16 @@ import torch
 from scipy.spatial.transform import Rotation
 
 from benchmarks.train_step import EPOCHS, SAMPLES, model_params
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import build_dataset, read_dataset, write_dataset
-from pimann.mann import MANN
-from pimann.params import Params, load_params
-from pimann.paths import REPO_ROOT
-from pimann.robot import STANDING_JOINTS
-from pimann.train import autocast, pick_device, train_models
-from pimann.training_loss import TrainingLoss
-from pimann.trajectory import Trajectory
+from pimann.core.params import Params, load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import STANDING_JOINTS
+from pimann.core.trajectory import Trajectory
+from pimann.learn.dataset import read_dataset, write_dataset
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.features import build_dataset
+from pimann.learn.mann import MANN
+from pimann.learn.train import autocast, pick_device, train_models
+from pimann.learn.training_loss import TrainingLoss
 
 SEEDS = [0, 1, 2, 3, 4]
 PI_WEIGHT = 10.0

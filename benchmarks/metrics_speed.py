@@ -14,11 +14,11 @@ import time
 
 import numpy as np
 
-from pimann.contacts import detect_contacts
-from pimann.metrics import trajectory_metrics, trajectory_time_series
-from pimann.params import load_params
-from pimann.robot import load_robot
-from pimann.trajectory import Trajectory
+from pimann.core.contacts import detect_contacts
+from pimann.core.params import load_params
+from pimann.core.robot import load_robot
+from pimann.core.trajectory import Trajectory
+from pimann.evaluate.metrics import trajectory_metrics, trajectory_time_series
 
 BUDGET_MS = 50.0
 
@@ -55,12 +55,16 @@ def main(argv: list[str] | None = None) -> int:
     frames, repeats = (50, 1) if args.smoke else (500, 5)
     budget = BUDGET_MS * frames / 500
     robot = load_robot("retarget")
-    params = load_params().evaluate
+    loaded = load_params()
+    params, contacts = loaded.evaluate, loaded.contacts
     trajectory = walking_like(robot, frames)
     for name, function in [
-        ("detect_contacts", lambda: detect_contacts(robot, trajectory, params)),
-        ("trajectory_metrics", lambda: trajectory_metrics(trajectory, robot, params)),
-        ("trajectory_time_series", lambda: trajectory_time_series(trajectory, robot, params)),
+        ("detect_contacts", lambda: detect_contacts(robot, trajectory, contacts)),
+        ("trajectory_metrics", lambda: trajectory_metrics(trajectory, robot, params, contacts)),
+        (
+            "trajectory_time_series",
+            lambda: trajectory_time_series(trajectory, robot, params, contacts),
+        ),
     ]:
         ms = best_of(function, repeats)
         print(

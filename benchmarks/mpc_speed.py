@@ -25,8 +25,8 @@ from collections.abc import Iterator
 import casadi as ca
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.params import MpcParams, load_params
+from pimann.core.errors import PimannError
+from pimann.core.params import MpcParams, load_params
 from pimann.sim.centroidal_mpc import CentroidalMPC, horizon_problem, knot_count
 from pimann.sim.synthetic import stepping_plan
 
@@ -110,7 +110,7 @@ def _walk(
 
 def _closed_loop_rtf(steps: int) -> tuple[float, float, bool]:
     """Real-time factor of the MuJoCo loop with the online controller, its median solve, fall."""
-    from pimann.robot import load_robot
+    from pimann.core.robot import load_robot
     from pimann.sim.run import simulate_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose

@@ -21,8 +21,8 @@ import sys
 import time
 from multiprocessing import Pool
 
+from pimann.core.params import DataParams, load_params
 from pimann.mocap.clips import Take, select_takes
-from pimann.params import DataParams, load_params
 from pimann.retarget import retarget_clip
 
 GOAL_S = 600.0  # s

@@ -18,8 +18,8 @@ import time
 import mujoco
 import pinocchio as pin
 
-from pimann.params import load_params
-from pimann.robot import load_robot
+from pimann.core.params import load_params
+from pimann.core.robot import load_robot
 from pimann.sim.dcm import plan_dcm
 from pimann.sim.footsteps import extract_footsteps
 from pimann.sim.model import build_sim_model

@@ -24,11 +24,11 @@ import time
 import numpy as np
 import torch
 
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.mann import MANN
-from pimann.params import load_params
-from pimann.train import autocast, pick_device, pick_precision
-from pimann.training_loss import TrainingLoss
+from pimann.core.params import load_params
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.mann import MANN
+from pimann.learn.train import autocast, pick_device, pick_precision
+from pimann.learn.training_loss import TrainingLoss
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -8,7 +8,7 @@ beside it with the bf16/float32 time ratio, and projected wall time of one full-
 and of the 26-model sweep on this machine in both precisions.
 
 Then the cost of train.rollout_states: one refresh of every member's own-rollout inputs
-(pimann.rollout_states, once an epoch, 50-frame pieces) against one epoch of PI steps on as
+(pimann.learn.rollout_states, once an epoch, 50-frame pieces) against one epoch of PI steps on as
 many samples, 1 model, batch 32.
 
 Then, on the whole machine, the 5 seeds of one weight at batch 32 with the PI term: one
@@ -32,14 +32,14 @@ import time
 import numpy as np
 import torch
 
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.mann import MANN
-from pimann.parallel import pool_map
-from pimann.params import load_params
-from pimann.physics_loss import PhysicsInformedLoss
-from pimann.robot import load_robot
-from pimann.rollout_states import OwnRollouts
-from pimann.train import autocast, cpu_has_bf16, seed_groups
+from pimann.core.parallel import pool_map
+from pimann.core.params import load_params
+from pimann.core.robot import load_robot
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.mann import MANN
+from pimann.learn.physics_loss import PhysicsInformedLoss
+from pimann.learn.rollout_states import OwnRollouts
+from pimann.learn.train import autocast, cpu_has_bf16, seed_groups
 
 INPUT_DIM, OUTPUT_DIM = 130, 100
 # output layout used here only to feed the PI loss: 7 future base linear and 7 angular
@@ -64,7 +64,7 @@ def make_step(
 ):
     """One AdamW step; `clean` (train.pi_dropout: false): L_B on the dropout-free prediction,
     from a second eval-mode pass ("two_pass") or one doubled pass ("fused", what train does);
-    `precision` bfloat16: the network under autocast, as pimann.train runs it."""
+    `precision` bfloat16: the network under autocast, as pimann.learn.train runs it."""
     optimiser = torch.optim.AdamW(model.parameters(), lr=1e-4, weight_decay=0.0025, fused=True)
     device = next(model.parameters()).device
 

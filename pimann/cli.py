@@ -16,16 +16,16 @@ import sys
 from collections.abc import Callable
 from pathlib import Path
 
-from pimann.data_check import MANIFEST
-from pimann.errors import PimannError, about
-from pimann.logs import quiet_third_party
+from pimann.core.data_check import MANIFEST
+from pimann.core.errors import PimannError, about
+from pimann.core.logs import quiet_third_party
 
 EXIT_BAD_INPUT = 2
 SKELETON_HELP = "BVH skeleton: a key of params data.skeletons (default: auto, recognised)"
 
 
 def _params(args: argparse.Namespace):
-    from pimann.params import load_params
+    from pimann.core.params import load_params
 
     return load_params(args.params)
 
@@ -48,10 +48,10 @@ def cmd_mocap_info(args: argparse.Namespace) -> None:
 
 
 def cmd_retarget(args: argparse.Namespace) -> None:
+    from pimann.core.trajectory import write_trajectory
     from pimann.mocap.io import read_mocap
     from pimann.mocap.mirror import mirror_trajectory
     from pimann.retarget import retarget_motion
-    from pimann.trajectory import write_trajectory
 
     params = _params(args)
     motion = read_mocap(args.file, _skeleton(args), args.rate)
@@ -63,14 +63,14 @@ def cmd_retarget(args: argparse.Namespace) -> None:
 
 def _read_trajectory(args: argparse.Namespace):
     """The input trajectory; its errors name the file (a reader may name the clip's source)."""
-    from pimann.trajectory import read_trajectory
+    from pimann.core.trajectory import read_trajectory
 
     with about(args.file):
         return read_trajectory(args.file, args.group)
 
 
 def cmd_render(args: argparse.Namespace) -> None:
-    from pimann.render import render_file
+    from pimann.render.beside_mocap import render_file
 
     _read_trajectory(args)  # bad input named by its file before any drawing
     skeleton = _skeleton(args) if args.mocap else None
@@ -80,12 +80,13 @@ def cmd_render(args: argparse.Namespace) -> None:
     }  # fmt: skip
     render_file(
         args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton,
+        contacts=_params(args).contacts,
         **{k: v for k, v in options.items() if v is not None},
     )  # fmt: skip
 
 
 def cmd_generate(args: argparse.Namespace) -> None:
-    from pimann.generate import generate_file
+    from pimann.generate.generator import generate_file
 
     params = _params(args)
     generate_file(
@@ -93,21 +94,34 @@ def cmd_generate(args: argparse.Namespace) -> None:
     )
 
 
+def cmd_params(args: argparse.Namespace) -> None:
+    """The effective params of the profile (default: params.yaml's `profile`), as YAML: the
+    base values with the profile's overrides applied, every value checked."""
+    import yaml
+
+    from pimann.core.params import as_dict, load_params
+
+    effective = as_dict(load_params(args.params, args.profile))
+    effective.pop("profiles")  # applied: what the stages read is below
+    print(yaml.safe_dump(effective, sort_keys=False, default_flow_style=False), end="")
+
+
 def cmd_metrics(args: argparse.Namespace) -> None:
-    from pimann.metrics import trajectory_metrics
-    from pimann.robot import load_robot
+    from pimann.core.robot import load_robot
+    from pimann.evaluate.metrics import trajectory_metrics
 
     trajectory = _read_trajectory(args)
     with about(args.file):
-        metrics = trajectory_metrics(trajectory, load_robot(), _params(args).evaluate)
+        params = _params(args)
+        metrics = trajectory_metrics(trajectory, load_robot(), params.evaluate, params.contacts)
     print(json.dumps(metrics, indent=2))
 
 
 def cmd_simulate(args: argparse.Namespace) -> None:
+    from pimann.core.trajectory import read_trajectory
     from pimann.sim.results import write_simulation
     from pimann.sim.run import simulate_trajectory
     from pimann.sim.video import check_video_path, render_simulation
-    from pimann.trajectory import read_trajectory
 
     params = _params(args).simulate
     if args.video:
@@ -129,8 +143,8 @@ def cmd_simulate(args: argparse.Namespace) -> None:
 
 def cmd_check_data(args: argparse.Namespace) -> int:
     """The shared folder against the data manifest: a line per problem on stderr, exit 2."""
-    from pimann.atomic import write_text_atomic
-    from pimann.data_check import build_manifest, check_groups, format_manifest, read_manifest
+    from pimann.core.atomic import write_text_atomic
+    from pimann.core.data_check import build_manifest, check_groups, format_manifest, read_manifest
 
     shared = args.shared.resolve() if args.shared else None
     if args.write_manifest:
@@ -163,7 +177,7 @@ def _global_options(parser: argparse.ArgumentParser, default: object) -> None:
 def _scenario_names() -> str:
     """The scenarios of the repository's params.yaml, for the help text."""
     try:
-        from pimann.params import load_params
+        from pimann.core.params import load_params
 
         return ", ".join(load_params().rollout.scenarios)
     except PimannError:
@@ -263,13 +277,18 @@ def _parser() -> argparse.ArgumentParser:
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")
     metrics.add_argument("--group", help="clip group inside a collection file")
+
+    params = add("params", cmd_params, "the effective params of a profile as YAML")
+    params.add_argument(
+        "--profile", help="a profile of params.yaml's profiles (default: its `profile`)"
+    )
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)
     if args.params is None:
-        from pimann.params import DEFAULT_PARAMS
+        from pimann.core.params import DEFAULT_PARAMS
 
         args.params = DEFAULT_PARAMS
     logging.basicConfig(

@@ -1,5 +1,5 @@
 """DVC stage `data_report`: the retargeted collection -> results/data_report.json, .md, .png
-(pimann.data_report: composition per source and motion class, and the evaluate stage's foot
+(pimann.evaluate.data_report: composition per source and motion class, and the evaluate stage's foot
 metrics applied to the data itself)."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.data_report import data_report
-from pimann.data_report_output import write_report
-from pimann.logs import parse_stage_args
-from pimann.parallel import cpu_workers
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.stage import stage_entry
+from pimann.core.logs import parse_stage_args
+from pimann.core.parallel import cpu_workers
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.evaluate.data_report import data_report
+from pimann.evaluate.data_report_output import write_report
 
 log = logging.getLogger("data_report")
 

@@ -1,7 +1,8 @@
 """DVC stage `evaluate`: results/rollouts -> results/metrics.csv, metrics_summary.json,
-timeseries/*.csv and claims.md (pimann.evaluate, pimann.claims), with the retargeted data's own
-sliding level (pimann.data_reference) beside, and command_following.csv, .md and .png
-(pimann.following)."""
+timeseries/*.csv and claims.md (pimann.evaluate.evaluation, pimann.evaluate.claims), with the
+retargeted data's own
+sliding level (pimann.evaluate.data_reference) beside, and command_following.csv, .md and .png
+(pimann.evaluate.following)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.evaluate import evaluate_all
-from pimann.logs import parse_stage_args
-from pimann.parallel import cpu_workers
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.stage import stage_entry
+from pimann.core.logs import parse_stage_args
+from pimann.core.parallel import cpu_workers
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.evaluate.evaluation import evaluate_all
 
 log = logging.getLogger("evaluate")
 

@@ -10,12 +10,13 @@ import logging
 import sys
 from pathlib import Path
 
-from pimann.feature_layout import VARIANTS
-from pimann.features import build_dataset, write_dataset
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.stage import stage_entry
-from pimann.trajectory import iter_collection
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.core.trajectory import iter_collection
+from pimann.learn.dataset import write_dataset
+from pimann.learn.feature_layout import VARIANTS
+from pimann.learn.features import build_dataset
 
 log = logging.getLogger("features")
 

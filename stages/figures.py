@@ -1,4 +1,5 @@
-"""DVC stage `figures`: results/ -> paper_figures/*.pdf|png (pimann.figures), nothing else read."""
+"""DVC stage `figures`: results/ -> paper_figures/*.pdf|png (pimann.report.figures), nothing else
+read."""
 
 from __future__ import annotations
 
@@ -8,11 +9,11 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.figures import make_figures
-from pimann.logs import parse_stage_args
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.stage import stage_entry
+from pimann.core.logs import parse_stage_args
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.report.figures import make_figures
 
 log = logging.getLogger("figures")
 
@@ -24,7 +25,10 @@ def main(argv: list[str] | None = None) -> None:
     parser.add_argument("--out", type=Path, default=Path("paper_figures"))
     args = parse_stage_args(parser, argv, log)
     started = time.perf_counter()
-    written = make_figures(REPO_ROOT / args.results, REPO_ROOT / args.out, load_params().figures)
+    params = load_params()
+    written = make_figures(
+        REPO_ROOT / args.results, REPO_ROOT / args.out, params.figures, params.evaluate.pi_weight
+    )
     log.info("%d figures -> %s in %.1f s", len(written), args.out, time.perf_counter() - started)
 
 

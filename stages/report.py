@@ -1,7 +1,7 @@
 """DVC stage `report`: results/ and paper_figures/ -> results/metrics.json (the study's key
-numbers, the pipeline's DVC metrics; pimann.key_metrics) and results/report.html (the study on
-one self-contained page; pimann.report); README.md's results block from metrics.json
-(pimann.readme_results)."""
+numbers, the pipeline's DVC metrics; pimann.report.key_metrics) and results/report.html (the study
+on one self-contained page; pimann.report.page); README.md's results block from metrics.json
+(pimann.report.readme_results)."""
 
 from __future__ import annotations
 
@@ -12,12 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.logs import parse_stage_args
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.readme_results import write_readme_results
-from pimann.report import write_report
-from pimann.stage import stage_entry
+from pimann.core.logs import parse_stage_args
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.report.page import write_report
+from pimann.report.readme_results import write_readme_results
 
 log = logging.getLogger("report")
 

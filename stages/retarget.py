@@ -14,16 +14,16 @@ import sys
 import time
 from multiprocessing import Pool
 
-from pimann.atomic import write_text_atomic
+from pimann.core.atomic import write_text_atomic
+from pimann.core.params import as_dict, load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.progress import track
+from pimann.core.stage import stage_entry
+from pimann.core.trajectory import write_collection
 from pimann.mocap.clips import select_takes
 from pimann.mocap.mirror import mirror_trajectory
-from pimann.params import as_dict, load_params
-from pimann.paths import REPO_ROOT
-from pimann.progress import track
 from pimann.retarget import retarget_clip
 from pimann.retarget.quality import quality_report, summarize
-from pimann.stage import stage_entry
-from pimann.trajectory import write_collection
 
 OUTPUT = REPO_ROOT / "data/retargeted/walking.h5"
 QUALITY = REPO_ROOT / "results/retarget_quality.json"

@@ -6,7 +6,7 @@ rolls out every seed of the training output in every scenario of `rollout.scenar
 and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>)
 and (`rollout.benchmark_train_clips`) a few training clips' (train_<clip name>), with and
 without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
-the models' meta in <out>/models.json (layout: pimann.rollout_layout).
+the models' meta in <out>/models.json (layout: pimann.generate.rollout_layout).
 """
 
 from __future__ import annotations
@@ -17,12 +17,12 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.logs import parse_stage_args
-from pimann.parallel import cpu_workers
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.rollouts import run_rollouts
-from pimann.stage import stage_entry
+from pimann.core.logs import parse_stage_args
+from pimann.core.parallel import cpu_workers
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.generate.rollouts import run_rollouts
 
 log = logging.getLogger("rollout")
 

@@ -18,11 +18,11 @@ import time
 from pathlib import Path
 
 import pimann.sim  # noqa: F401 -- picks MuJoCo's headless GL backend before mujoco loads
-from pimann.logs import parse_stage_args
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
+from pimann.core.logs import parse_stage_args
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
 from pimann.sim.runs import simulate_runs
-from pimann.stage import stage_entry
 
 log = logging.getLogger("simulate")
 

@@ -17,12 +17,12 @@ import sys
 import time
 from pathlib import Path
 
-from pimann.feature_layout import VARIANTS
-from pimann.logs import parse_stage_args
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.stage import stage_entry
-from pimann.train import pick_device, train_models
+from pimann.core.logs import parse_stage_args
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.learn.feature_layout import VARIANTS
+from pimann.learn.train import pick_device, train_models
 
 log = logging.getLogger("train")
 

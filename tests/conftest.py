@@ -1,26 +1,20 @@
-"""Shared fixtures: the real ergoCub model from the shared folder, seeded generators."""
+"""Shared fixtures: the real ergoCub model from the shared folder, seeded generators, and the
+small training's params and dataset (test_train, test_rollout_states)."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
+from builders import SMALL_MODEL, synthetic_collection
 
-from pimann.params import EvaluateParams, SimulateParams, load_params
-from pimann.robot import Robot, load_robot
+from pimann.core.params import SimulateParams, load_params
+from pimann.core.robot import Robot, load_robot
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
-
-# The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
-EVALUATE_PARAMS = EvaluateParams(
-    contact_on_height=0.02,
-    contact_off_height=0.02,
-    contact_switch_time=0.04,
-    skating_height=0.05,
-    skating_speed_per_frame=0.025,
-    skating_rate_hz=20.0,
-    walk_distance=1.0,
-    foot_velocity_frame="local_world_aligned",
-)
 
 
 @pytest.fixture(scope="session")
@@ -50,13 +44,6 @@ def rng() -> np.random.Generator:
     return np.random.default_rng(1234)
 
 
-def random_configuration(robot: Robot, rng: np.random.Generator) -> np.ndarray:
-    """A configuration with a random base pose and joints inside their limits."""
-    joints = rng.uniform(robot.joint_lower, robot.joint_upper)
-    quaternion = rng.normal(size=4)
-    return robot.configuration(rng.normal(size=3), quaternion, joints)
-
-
 REAL_WALK = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"
 REAL_BACKWARD = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk-back_active_001.bvh"
 
@@ -65,8 +52,8 @@ REAL_BACKWARD = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk-back_
 def real_walks():
     """{name: trajectory}: two real Bandai Namco clips (forward, backward) retargeted as the
     retarget stage does it, and the forward one's mirror (about 4 s of CPU)."""
+    from pimann.core.paths import mocap_dir
     from pimann.mocap.mirror import mirror_trajectory
-    from pimann.paths import mocap_dir
     from pimann.retarget import retarget_file
 
     params = load_params()
@@ -77,3 +64,21 @@ def real_walks():
         "walk_mirrored": mirror_trajectory(forward),
         "walk_back": retarget_file(root / REAL_BACKWARD, params),
     }
+
+
+@pytest.fixture(scope="module")
+def params():
+    """The small training's params (test_train, test_rollout_states); a test module's own
+    `params` fixture overrides this one."""
+    base = load_params()
+    train = dataclasses.replace(base.train, epochs=4, batch_size=64, device="cpu")
+    return dataclasses.replace(base, model=SMALL_MODEL, train=train)
+
+
+@pytest.fixture(scope="module")
+def dataset_path(tmp_path_factory, params):
+    """A tiny dataset: 4 synthetic sources and their 'mirrors', ~50 samples each."""
+    dataset = build_dataset(synthetic_collection(n_sources=4, frames=160), params.features, "full")
+    path = tmp_path_factory.mktemp("features") / "full.h5"
+    write_dataset(path, dataset)
+    return path

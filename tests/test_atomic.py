@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from pimann.atomic import atomic_path, write_text_atomic
+from pimann.core.atomic import atomic_path, write_text_atomic
 
 
 def _leftovers(folder):

@@ -1,4 +1,4 @@
-"""Batched generation (pimann.batch_generate): a row of a batch is the same rollout alone.
+"""Batched generation (pimann.generate.batch_generate): a row of a batch is the same rollout alone.
 
 Float64 models (the analytic gait of test_generate and a tiny trained MANN), so the only
 difference a batch could make is rounding; rows with different scripts (stand segments
@@ -12,18 +12,18 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from test_generate import IDENTITY, LAYOUT, GaitModel
+from builders import IDENTITY, LAYOUT, GaitModel
 
-from pimann.batch_generate import BatchGenerator
-from pimann.contacts import FEET
-from pimann.feature_layout import Normalisation
-from pimann.features import clip_features
-from pimann.generate import RolloutSpec, generate_batch, generate_rollout
-from pimann.leg_odometry import SoleFrames
-from pimann.mann import MANN
-from pimann.params import ModelParams, MotionSegment, StandSegment
-from pimann.rollout_network import NumpyMANN
-from pimann.standing import StandingPose
+from pimann.core.contacts import FEET
+from pimann.core.params import ModelParams, MotionSegment, StandSegment
+from pimann.generate.batch_generate import BatchGenerator
+from pimann.generate.generator import RolloutSpec, generate_batch, generate_rollout
+from pimann.generate.leg_odometry import SoleFrames
+from pimann.generate.rollout_network import NumpyMANN
+from pimann.learn.feature_layout import Normalisation
+from pimann.learn.features import clip_features
+from pimann.learn.mann import MANN
+from pimann.learn.standing import StandingPose
 
 M, S = MotionSegment, StandSegment
 SCRIPTS = [
@@ -64,12 +64,12 @@ def batch_against_alone(
     pairs = [(script, steering) for steering in (False, True) for script in scripts]
     specs = [RolloutSpec(s, st, f"row{i}", {"row": i}) for i, (s, st) in enumerate(pairs)]
     rows = generate_batch(
-        model, LAYOUT, stats, specs, rollout_params, robot, contact_params=params.evaluate
+        model, LAYOUT, stats, specs, rollout_params, robot, contact_params=params.contacts
     )
     for spec, row in zip(specs, rows, strict=True):
         alone = generate_rollout(
             model, LAYOUT, stats, spec.script, rollout_params, spec.steering, robot,
-            contact_params=params.evaluate, source=spec.source, attrs=spec.attrs,
+            contact_params=params.contacts, source=spec.source, attrs=spec.attrs,
         )  # fmt: skip
         assert_same_rollout(alone, row, tolerance)
     return rows
@@ -77,7 +77,7 @@ def batch_against_alone(
 
 @pytest.fixture(scope="module")
 def params():
-    from pimann.params import load_params
+    from pimann.core.params import load_params
 
     return load_params()
 
@@ -105,7 +105,7 @@ def trained(robot, params) -> tuple[MANN, Normalisation]:
     walk = M(3.0, 0.5, 0.0, 0.0)
     data = generate_rollout(
         GaitModel(robot), LAYOUT, IDENTITY, [walk, S(1.5, True), walk], params.rollout, True,
-        robot, contact_params=params.evaluate,
+        robot, contact_params=params.contacts,
     ).trajectory  # fmt: skip
     x, y, _ = clip_features(data, LAYOUT)
     stats = Normalisation.fit(x, y)
@@ -168,7 +168,7 @@ def test_a_cpu_model_runs_its_network_in_numpy(robot, params, trained):
     model, stats = trained
     generators = [
         BatchGenerator(candidate, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
-                       params.evaluate, StandingPose.nominal())
+                       params.contacts, StandingPose.nominal())
         for candidate, rows in ((model, 1), (model, 2), (_two_member(model), 2))
     ]  # fmt: skip
     assert isinstance(generators[0].network.numpy, NumpyMANN)  # alone

@@ -12,8 +12,8 @@ from pathlib import Path
 import pytest
 import torch
 
-from pimann.params import load_params
-from pimann.paths import shared_glob
+from pimann.core.params import load_params
+from pimann.core.paths import shared_glob
 
 REPO = Path(__file__).resolve().parents[1]
 BENCHMARKS = sorted(

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.paths import mocap_dir
 from pimann.mocap.bvh import detect_unit, forward_kinematics, parse_bvh, read_bvh, world_axes
-from pimann.paths import mocap_dir
 
 CHANNELS = "CHANNELS 6 Xposition Yposition Zposition Zrotation Xrotation Yrotation"
 REAL_CLIP = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"

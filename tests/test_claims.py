@@ -1,15 +1,17 @@
-"""The paper's claims (pimann.claims) on crafted metrics tables: the statuses, the seed-spread
+"""The paper's claims (pimann.evaluate.claims) on crafted metrics tables: the statuses, the
+seed-spread
 and standing-still rules, C1's tolerance, C4's reduction and the claims table."""
 
 from __future__ import annotations
 
 import re
 
-import pandas as pd
 import pytest
+from builders import AGREEING, REFERENCE, crafted_metrics
 
-from pimann.claim_rules import CONFIGURATION_HELD
-from pimann.claims import (
+from pimann.core.params import load_params
+from pimann.evaluate.claim_rules import CONFIGURATION_HELD
+from pimann.evaluate.claims import (
     FAILS,
     HOLDS,
     NOT_COMPARABLE,
@@ -20,65 +22,9 @@ from pimann.claims import (
     data_claim,
     evaluate_claims,
 )
-from pimann.params import load_params
-from pimann.rollout_layout import BASELINE
+from pimann.generate.rollout_layout import BASELINE
 
-WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
-# seed medians of a study that agrees with the paper
-AGREEING = {
-    "support_rmse_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9, "w100": 15},
-    "support_rmse_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5, "w100": 9},
-    "support_rmse_linear_world_total": {BASELINE: 24, "w0": 14, "w1": 12, "w10": 9, "w20": 10,
-                                        "w100": 17},
-    "support_rmse_linear_position_total": {BASELINE: 15, "w0": 9, "w1": 8, "w10": 6, "w20": 7,
-                                           "w100": 12},
-    "contact_sole_pitch_max_abs": {BASELINE: 0.1, "w0": 0.05, "w1": 0.06, "w10": 0.08,
-                                   "w20": 0.09, "w100": 0.3},
-    "contact_foot_speed_mean": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1, "w20": 0.1,
-                                "w100": 0.2},
-    "contact_foot_speed_mean_position": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1,
-                                         "w20": 0.1, "w100": 0.2},
-}  # fmt: skip
 ALL = [f"C{k}" for k in range(1, 15)]
-REFERENCE = {
-    "label": "data (retargeted, forward walking)", "frames": 500, "min_forward_frames": 250,
-    "joint_velocities": "differences",
-    "all": {"clips": 82, "used": 16, "metrics": {
-        "support_rmse_linear_total": {"median": 12.0},
-        "support_rmse_linear_world_total": {"median": 13.2},
-        "support_rmse_angular_total": {"median": 2.44},
-        "support_rmse_linear_position_total": {"median": 12.0},
-        "support_rmse_linear_position_world_total": {"median": 13.2},
-        "support_rmse_angular_position_total": {"median": 2.44},
-        "support_rmse_linear_position_liftoff_share": {"median": 0.31},
-        "contact_liftoff_frames_share": {"median": 0.18},
-    }},
-    "test": {"clips": 6, "used": 0, "metrics": {}},
-}  # fmt: skip
-
-
-def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFrame:
-    """metrics.csv rows: median over seeds = `values` (seed offsets -2..2 x 1 %)."""
-    rows = []
-    for model, weight in WEIGHTS.items():
-        for seed in seeds:
-            for steering in (False, True):
-                offset = 1.0 + 0.01 * (seed - 2)
-                row = {
-                    "model": model, "variant": "ground_projected" if model == BASELINE else "full",
-                    "pi_weight": weight, "seed": seed, "scenario": "forward",
-                    "steering": steering, "rollout": f"{model}/{seed}/forward.h5",
-                }  # fmt: skip
-                for metric, by_model in values.items():
-                    row[metric] = by_model[model] * offset
-                unsteered_pi = model != BASELINE and not steering
-                row["drift_y_max_abs"] = 0.8 if unsteered_pi else 0.3 if not steering else 0.05
-                row["drift_yaw_max_abs"] = 0.6 if unsteered_pi else 0.2 if not steering else 0.02
-                row["drift_y_max_abs"] *= offset
-                row["walks"] = not (model == "w100" and not steering)
-                row["skating_ratio"] = 0.1 * offset
-                rows.append(row)
-    return pd.DataFrame(rows)
 
 
 @pytest.fixture(scope="module")
@@ -95,7 +41,7 @@ def _rows(frame, model, steering=False):
 
 
 def test_claims_hold_on_agreeing_numbers(params):
-    claims = evaluate_claims(crafted_metrics(), params.figures)
+    claims = evaluate_claims(crafted_metrics(), params.figures, params.evaluate.pi_weight)
     assert [c.id for c in claims] == ALL
     assert all(status == HOLDS for status in statuses(claims).values()), statuses(claims)
 
@@ -110,7 +56,7 @@ def test_claims_fail_on_contradicting_numbers(params):
     frame.loc[frame["model"] == "w100", "walks"] = True  # w=100 walks unsteered too
     # steering leaves the yaw drift of w=10 as large as without
     frame.loc[_rows(frame, "w10", True), "drift_yaw_max_abs"] = 0.6
-    claims = statuses(evaluate_claims(frame, params.figures))
+    claims = statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))
     assert claims["C2"] == HOLDS  # linear still below the baseline for every w
     assert claims["C3"] == FAILS
     assert claims["C5"] == FAILS
@@ -123,7 +69,11 @@ def test_claims_fail_on_contradicting_numbers(params):
 
 def test_claims_without_baseline_are_not_comparable(params):
     frame = crafted_metrics()
-    claims = statuses(evaluate_claims(frame[frame["model"] != BASELINE], params.figures))
+    claims = statuses(
+        evaluate_claims(
+            frame[frame["model"] != BASELINE], params.figures, params.evaluate.pi_weight
+        )
+    )
     for claim in ("C1", "C2", "C3", "C4", "C12", "C13"):
         assert claims[claim] == NOT_COMPARABLE, claim
     assert claims["C5"] == HOLDS
@@ -131,20 +81,20 @@ def test_claims_without_baseline_are_not_comparable(params):
 
 def test_c1_compares_angular_directly_and_linear_in_the_world_representation(params):
     frame = crafted_metrics()
-    c1 = evaluate_claims(frame, params.figures)[0]
+    c1 = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0]
     assert c1.id == "C1" and c1.status == HOLDS
     assert "world" in c1.ours and "local_world_aligned" in c1.ours and "velocity-level" in c1.metric
     # our representation at the paper's number does not help: the world one is x2.2 the paper's
     frame["support_rmse_linear_total"] = 22.88
     frame["support_rmse_linear_world_total"] = 2.2 * 22.88
-    c1 = evaluate_claims(frame, params.figures)[0]
+    c1 = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0]
     assert c1.status == FAILS and "linear x2.20" in c1.reason
     # within a factor 2 both ways: half the paper's angular still holds, a third does not
     frame["support_rmse_linear_world_total"] = 22.88
     frame["support_rmse_angular_total"] = 17.74 / 1.9
-    assert evaluate_claims(frame, params.figures)[0].status == HOLDS
+    assert evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0].status == HOLDS
     frame["support_rmse_angular_total"] = 17.74 / 3
-    assert evaluate_claims(frame, params.figures)[0].status == FAILS
+    assert evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0].status == FAILS
 
 
 def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
@@ -154,19 +104,21 @@ def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
     frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 4, 4, 4, 17.8]
     # w=10's contact feet: median slower than w=0's, one seed faster than w=0's slowest
     frame.loc[_rows(frame, "w10"), "contact_foot_speed_mean_position"] = [0.1, 0.1, 0.1, 0.1, 0.3]
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
     assert claims["C3"].status == WITHIN_SPREAD and "w=20" in claims["C3"].reason
     assert claims["C14"].status == WITHIN_SPREAD
     assert claims["C2"].status == HOLDS
     # medians in the wrong order do not hold at all
     frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 30, 30, 30, 30]
-    assert statuses(evaluate_claims(frame, params.figures))["C3"] == FAILS
+    assert (
+        statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))["C3"] == FAILS
+    )
 
 
 def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False  # unsteered w=10 stands still
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
     for claim in ("C2", "C3", "C4", "C5", "C14"):
         assert claims[claim].status == STANDS_STILL, claim
         assert "w10 seeds 0, 1, 2, 3, 4 do not walk" in claims[claim].reason
@@ -175,7 +127,7 @@ def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     assert claims["C10"].status == HOLDS and claims["C11"].status == HOLDS
     assert claims["C12"].status == HOLDS  # the favoured one is the baseline: it walks
     frame.loc[_rows(frame, BASELINE) & (frame["seed"] == 3), "walks"] = False
-    claims = statuses(evaluate_claims(frame, params.figures))
+    claims = statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))
     assert claims["C1"] == STANDS_STILL and claims["C12"] == STANDS_STILL
 
 
@@ -188,7 +140,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     position = (frame["model"] == "w10").map({True: 12.0, False: 30.0})
     frame["support_rmse_linear_position_total"] = position
     frame["double_support_fraction"] = (frame["model"] == "baseline").map({True: 0.6, False: 0.3})
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
     c4 = claims["C4"]
     assert c4.status == FAILS and "no reduction in linear" in c4.reason
     assert "linear -30%" in c4.ours
@@ -201,7 +153,10 @@ def test_c4_needs_a_reduction_in_both_parts(params):
 
 
 def test_every_claim_names_its_metric(params):
-    claims = {c.id: c for c in evaluate_claims(crafted_metrics(), params.figures)}
+    claims = {
+        c.id: c
+        for c in evaluate_claims(crafted_metrics(), params.figures, params.evaluate.pi_weight)
+    }
     for claim in ("C1", "C2", "C3", "C4", "C5"):
         assert "velocity-level" in claims[claim].metric, claim
     assert "position-level" in claims["C14"].metric
@@ -211,7 +166,7 @@ def test_every_claim_names_its_metric(params):
 def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False
-    claims = evaluate_claims(frame, params.figures)
+    claims = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)
     text = claims_markdown(claims, {"profile": "quick"}, REFERENCE)
     for rule in RULES:
         assert rule in text
@@ -234,10 +189,14 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)  # below every other weight's
     frame = crafted_metrics(values)
-    (c9,) = [c for c in evaluate_claims(frame, params.figures) if c.id == "C9"]
+    (c9,) = [
+        c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight) if c.id == "C9"
+    ]
     assert c9.status == FAILS and "w=100 (0% of seeds walk)" in c9.reason
     frame.loc[frame["model"] == "w100", "walks"] = True
-    (c9,) = [c for c in evaluate_claims(frame, params.figures) if c.id == "C9"]
+    (c9,) = [
+        c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight) if c.id == "C9"
+    ]
     assert c9.status == FAILS and "walks at" not in c9.reason
     assert "holds the configuration" not in c9.reason  # the paper's pi_gradient: both
 
@@ -246,11 +205,13 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
 def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
     """A failing C9 says when train.pi_gradient keeps L_B's gradient off the configuration:
     exactly the values whose training loss detaches the predicted joints."""
-    from pimann.training_loss import _HELD
+    from pimann.learn.training_loss import _HELD
 
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)
-    claims = evaluate_claims(crafted_metrics(values), params.figures, pi_gradient=pi_gradient)
+    claims = evaluate_claims(
+        crafted_metrics(values), params.figures, params.evaluate.pi_weight, pi_gradient=pi_gradient
+    )
     (c9,) = [c for c in claims if c.id == "C9"]
     named = f"train.pi_gradient {pi_gradient} holds the configuration" in c9.reason
     assert named == ("joints" in _HELD[pi_gradient]) == (pi_gradient in CONFIGURATION_HELD)

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from pimann.cli import main
-from pimann.paths import shared_dir
+from pimann.core.paths import shared_dir
 
 MVNX = shared_dir() / "data" / "xsens" / "mvnx" / "Meri-020.mvnx"
 
@@ -62,7 +62,7 @@ def test_every_argument_has_help_and_generate_lists_the_scenarios():
     import argparse
 
     from pimann.cli import _parser
-    from pimann.params import load_params
+    from pimann.core.params import load_params
 
     parser = _parser()
     subparsers = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
@@ -91,3 +91,23 @@ def test_global_options_after_the_subcommand(tmp_path, capsys):
         main(["generate", "none", "--scenario", "forward", "-o", "o.h5", "--params", str(bad)]) == 2
     )
     assert str(bad) in capsys.readouterr().err
+
+
+def test_params_prints_the_effective_params_of_a_profile(tmp_path, capsys):
+    import yaml
+
+    raw = yaml.safe_load(Path("params.yaml").read_text())
+    raw["profile"] = "paper"
+    raw["profiles"]["quick"]["train.epochs"] = 7
+    path = tmp_path / "params.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    assert main(["params", "--params", str(path)]) == 0
+    paper = yaml.safe_load(capsys.readouterr().out)
+    assert paper["profile"] == "paper" and "profiles" not in paper
+    assert paper["train"]["epochs"] == raw["train"]["epochs"]
+    assert main(["params", "--params", str(path), "--profile", "quick"]) == 0
+    quick = yaml.safe_load(capsys.readouterr().out)
+    assert quick["profile"] == "quick" and quick["train"]["epochs"] == 7
+    assert quick["contacts"] == paper["contacts"] == raw["contacts"]
+    assert main(["params", "--params", str(path), "--profile", "huge"]) == 2
+    assert "profile 'huge'" in capsys.readouterr().err

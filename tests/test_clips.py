@@ -11,8 +11,12 @@ import numpy as np
 import pytest
 import yaml
 
-from pimann.errors import PimannError
-from pimann.features import split_sources
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import N_JOINTS, SEGMENTS
+from pimann.core.trajectory import Trajectory
+from pimann.learn.features import split_sources
 from pimann.mocap.clips import (
     Take,
     cut_take,
@@ -24,10 +28,6 @@ from pimann.mocap.clips import (
 )
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import mirror_trajectory as mirror
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.robot import N_JOINTS, SEGMENTS
-from pimann.trajectory import Trajectory
 
 
 @pytest.fixture(scope="module")

@@ -14,17 +14,24 @@ import matplotlib
 import numpy as np
 import pandas as pd
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import (
+    CONTACT_PARAMS,
+    EVALUATE_PARAMS,
+    RATE,
+    GaitModel,
+    crafted_rows,  # noqa: F401
+    make_trajectory,
+    roll,
+)
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from test_data_report import RATE, make_trajectory
-from test_generate import GaitModel, roll
 
-from pimann import command_following as cf
-from pimann.clip_commands import clip_commands, segment_class
-from pimann.command_following_figure import fig_command_following
-from pimann.figures import style
-from pimann.following import summary_table
-from pimann.params import MotionSegment, StandSegment, load_params
+from pimann.core.contacts import touchdowns
+from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.evaluate import command_following as cf
+from pimann.evaluate.command_following_figure import fig_command_following
+from pimann.evaluate.figure_style import style
+from pimann.evaluate.following import summary_table
+from pimann.generate.clip_commands import clip_commands, segment_class
 
 DT = 1.0 / RATE
 
@@ -113,7 +120,7 @@ def test_a_clip_follows_its_own_commands(robot):
     """The data's own score: a swaying clip measured against the script cut from it."""
     clip = make_trajectory(*follow(SCRIPT, heading=2.0, wobble=0.1, sway=0.3))
     script = clip_commands(clip)
-    rows = cf.follow_measures(clip, script, robot, EVALUATE_PARAMS)
+    rows = cf.follow_measures(clip, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert [r["class"] for r in rows] == ["standing", "forward", "backward"]
     for row in rows[1:]:
         assert row["speed_ratio"] == pytest.approx(1.0, abs=0.05)
@@ -127,7 +134,7 @@ def test_a_clip_follows_its_own_commands(robot):
 def exact_rows(robot):
     script = [*SCRIPT, MotionSegment(10.0, 0.6, 0.0, 0.3), StandSegment(5.0, True)]
     trajectory = make_trajectory(*follow(script, heading=0.3))
-    return script, cf.follow_measures(trajectory, script, robot, EVALUATE_PARAMS)
+    return script, cf.follow_measures(trajectory, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
 
 
 def test_follow_measures_of_an_exact_follower(exact_rows):
@@ -172,7 +179,7 @@ def test_follow_measures_of_an_exact_follower(exact_rows):
 def test_follow_measures_of_a_robot_that_stands_still(robot):
     script = [MotionSegment(10.0, 0.8, 0.0, 0.0)]
     still = make_trajectory(np.zeros((501, 2)), yaw=0.4)
-    (row,) = cf.follow_measures(still, script, robot, EVALUATE_PARAMS)
+    (row,) = cf.follow_measures(still, script, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert row["speed_ratio"] == pytest.approx(0.0, abs=1e-9)
     assert row["heading_error_max_deg"] == pytest.approx(0.0, abs=1e-9)
     assert row["alternates"] is False
@@ -187,7 +194,9 @@ def test_follow_measures_of_a_slow_drifting_follower(robot):
     """70% of the commanded speed and a 0.05 rad/s unwanted turn: ratio 0.7, heading off."""
     script = [MotionSegment(10.0, 0.8, 0.0, 0.0)]
     xy, yaw = follow([MotionSegment(10.0, 0.8, 0.0, 0.05)], speed_scale=0.7)
-    (row,) = cf.follow_measures(make_trajectory(xy, yaw=yaw), script, robot, EVALUATE_PARAMS)
+    (row,) = cf.follow_measures(
+        make_trajectory(xy, yaw=yaw), script, robot, EVALUATE_PARAMS, CONTACT_PARAMS
+    )
     assert row["speed_ratio"] == pytest.approx(0.7, abs=1e-6)
     assert (row["vx"], row["vy"]) == pytest.approx((0.56, 0.0), abs=1e-6)  # heading frame
     assert row["yaw_rate"] == pytest.approx(0.05, abs=1e-9)
@@ -196,10 +205,12 @@ def test_follow_measures_of_a_slow_drifting_follower(robot):
 
 
 def test_follow_measures_reject_a_rollout_of_another_script(robot):
-    from pimann.errors import PimannError
+    from pimann.core.errors import PimannError
 
     with pytest.raises(PimannError, match="frames"):
-        cf.follow_measures(make_trajectory(np.zeros((100, 2))), SCRIPT, robot, EVALUATE_PARAMS)
+        cf.follow_measures(
+            make_trajectory(np.zeros((100, 2))), SCRIPT, robot, EVALUATE_PARAMS, CONTACT_PARAMS
+        )
 
 
 def test_drift_is_last_window_minus_first():
@@ -211,7 +222,7 @@ def test_drift_is_last_window_minus_first():
 def test_touchdowns_and_alternation_on_synthetic_contacts():
     phase = np.arange(200) % 50  # 1 s gait: left down 0-29, right down 25-49 and 0-4
     contacts = np.column_stack([phase < 30, (phase >= 25) | (phase < 5)])
-    counts = cf.touchdowns(contacts)
+    counts = touchdowns(contacts)
     assert counts.tolist() == [3, 4]  # the left starts down; the right touches down each cycle
     assert cf.feet_alternate(counts, moving=True)
     assert not cf.feet_alternate([4, 1], moving=True)  # one foot steps, the other drags
@@ -223,10 +234,10 @@ def test_touchdowns_and_alternation_on_synthetic_contacts():
     assert not cf.feet_alternate([0, 1], True, 2 * cf.STRIDE_S)
     assert not cf.feet_alternate([0, 0], True, 1.0)  # but it steps
     assert not cf.feet_alternate([2, 0], True, 1.0)
-    shares = [cf.touchdowns(contacts[k : k + 40]) for k in range(0, 160, 5)]
+    shares = [touchdowns(contacts[k : k + 40]) for k in range(0, 160, 5)]
     assert all(cf.feet_alternate(c, True, 0.8) for c in shares)
     assert not all(min(c) >= 1 for c in shares)  # the stricter rule fails the gait itself
-    assert cf.touchdowns(np.ones((10, 2), bool)).tolist() == [0, 0]
+    assert touchdowns(np.ones((10, 2), bool)).tolist() == [0, 0]
 
 
 def test_a_stepping_gait_alternates_and_stands(robot):
@@ -234,7 +245,7 @@ def test_a_stepping_gait_alternates_and_stands(robot):
     params = dataclasses.replace(load_params(), evaluate=EVALUATE_PARAMS)
     script = [StandSegment(1.0, True), MotionSegment(4.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
     trajectory = roll(GaitModel(robot), script, params, False, robot).trajectory
-    rows = cf.follow_measures(trajectory, script, robot, params.evaluate)
+    rows = cf.follow_measures(trajectory, script, robot, params.evaluate, params.contacts)
     walk = rows[1]
     assert walk["alternates"] is True
     assert min(walk["touchdowns_left"], walk["touchdowns_right"]) >= 3
@@ -246,55 +257,6 @@ def test_a_stepping_gait_alternates_and_stands(robot):
 
 
 # ----------------------------------------------------------------------------- summary
-
-
-def crafted_rows() -> pd.DataFrame:
-    """Two models x two steering x three seeds: forward, turning in place and stand rows."""
-    rows = []
-    for model, weight in (("baseline", 0.0), ("w10", 10.0)):
-        for steering in (False, True):
-            for seed in range(3):
-                good = model == "w10" and steering
-                speed = 0.78 if good else 0.4 + 0.05 * seed
-                common = {"model": model, "pi_weight": weight, "steering": steering, "seed": seed}
-                for k in range(2):  # two forward segments per seed, averaged first
-                    rows.append({
-                        **common, "segment": k, "class": "forward", "stand": False,
-                        "cmd_speed": 0.8, "speed_along": speed + 0.02 * k,
-                        "speed_ratio": (speed + 0.02 * k) / 0.8, "cmd_yaw_rate": 0.0,
-                        "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                        "heading_error_max_deg": 3.0 if good else 12.0 + seed,
-                        "heading_error_final_deg": -3.0 if good else 12.0,
-                        "alternates": good or seed == 0, "sliding_linear": 10.0 + seed,
-                        "sliding_linear_position": 6.0 + seed,
-                        "sliding_angular": 5.0, "base_travel_m": np.nan,
-                        "base_travel_limit_m": np.nan, "foot_speed_max": np.nan,
-                        "roll_drift_deg": 1.0, "pitch_drift_deg": -2.0 if good else -7.0,
-                        "foot_pitch_drift_deg": np.nan,
-                    })  # fmt: skip
-                rows.append({
-                    **common, "segment": 2, "class": "turning_in_place", "stand": False,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.5, "yaw_rate": 0.45, "yaw_rate_ratio": 0.9,
-                    "heading_error_max_deg": 4.0, "heading_error_final_deg": 4.0,
-                    "alternates": True, "sliding_linear": 1.0, "sliding_angular": 8.0,
-                    "sliding_linear_position": 1.0,
-                    "base_travel_m": np.nan, "base_travel_limit_m": np.nan,
-                    "foot_speed_max": np.nan, "roll_drift_deg": 0.5, "pitch_drift_deg": 0.5,
-                    "foot_pitch_drift_deg": 0.5,
-                })  # fmt: skip
-                rows.append({
-                    **common, "segment": 3, "class": "standing", "stand": True,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.0, "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                    "heading_error_max_deg": 0.5, "heading_error_final_deg": 0.5,
-                    "alternates": True, "sliding_linear": 0.0, "sliding_angular": 0.0,
-                    "sliding_linear_position": 0.0,
-                    "base_travel_m": 0.02 if good else 0.2, "base_travel_limit_m": 0.04,
-                    "foot_speed_max": 0.01, "roll_drift_deg": 0.1, "pitch_drift_deg": 0.1,
-                    "foot_pitch_drift_deg": 0.1,
-                })  # fmt: skip
-    return pd.DataFrame(rows)
 
 
 def test_summary_medians_and_criteria():
@@ -328,7 +290,7 @@ def test_summary_medians_and_criteria():
 
 
 def test_summary_needs_the_key_columns():
-    from pimann.errors import PimannError
+    from pimann.core.errors import PimannError
 
     with pytest.raises(PimannError, match="seed"):
         cf.summarise_following(crafted_rows().drop(columns="seed"))

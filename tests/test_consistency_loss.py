@@ -9,10 +9,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import clip_features
-from pimann.params import load_params
-from pimann.training_loss import TrainingLoss
+from pimann.core.params import load_params
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.features import clip_features
+from pimann.learn.training_loss import TrainingLoss
 
 PARAMS = load_params()
 

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import CONTACT_PARAMS
 
-from pimann.contacts import (
+from pimann.core.contacts import (
     FEET,
     SchmittTrigger,
     contacts_from_heights,
@@ -16,12 +16,12 @@ from pimann.contacts import (
     lowest_corner_heights,
     trajectory_configurations,
 )
-from pimann.errors import PimannError
-from pimann.params import EvaluateParams
-from pimann.robot import SOLE_CORNERS
-from pimann.trajectory import Trajectory
+from pimann.core.errors import PimannError
+from pimann.core.params import ContactParams
+from pimann.core.robot import SOLE_CORNERS
+from pimann.core.trajectory import Trajectory
 
-PARAMS = EVALUATE_PARAMS
+PARAMS = CONTACT_PARAMS
 DT = 0.02  # 50 Hz
 
 
@@ -41,14 +41,12 @@ def test_delay_scales_with_the_rate():
     heights = np.r_[np.zeros(5), np.full(20, 0.1)]
     contacts = contacts_from_heights(heights, 0.01, PARAMS)  # 100 Hz: 0.04 s = 4 steps
     assert np.flatnonzero(~contacts)[0] == 5 + 4
-    immediate = EvaluateParams(**{**vars(PARAMS), "contact_switch_time": 0.0})
+    immediate = ContactParams(**{**vars(PARAMS), "switch_time": 0.0})
     assert np.flatnonzero(~contacts_from_heights(heights, 0.01, immediate))[0] == 5
 
 
 def test_hysteresis_band_keeps_the_state():
-    params = EvaluateParams(
-        **{**vars(PARAMS), "contact_on_height": 0.01, "contact_off_height": 0.03}
-    )
+    params = ContactParams(**{**vars(PARAMS), "on_height": 0.01, "off_height": 0.03})
     # 0.02 lies in the band: it neither switches a contact off nor a swing foot on
     heights = np.r_[np.zeros(3), np.full(5, 0.02), np.full(5, 0.05), np.full(5, 0.02)]
     contacts = contacts_from_heights(heights, DT, params)
@@ -97,7 +95,7 @@ def _trajectory(robot, base_positions, rate=50.0):
 
 
 def test_corner_heights_match_pinocchio(robot, rng):
-    from conftest import random_configuration
+    from builders import random_configuration
 
     configurations = np.array([random_configuration(robot, rng) for _ in range(5)])
     kinematics = foot_kinematics(robot, configurations)

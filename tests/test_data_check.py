@@ -1,4 +1,4 @@
-"""Checked data (pimann.data_check): the real shared folder matches the committed manifest, and
+"""Checked data (pimann.core.data_check): the real shared folder matches the committed manifest, and
 on a copy of a few of its files a changed, a missing or an unlisted file is named, by the
 check, by `pimann check-data` and by a stage before it runs."""
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 
 from pimann.cli import main as cli
-from pimann.data_check import (
+from pimann.core.data_check import (
     MANIFEST,
     MOCAP,
     Group,
@@ -22,11 +22,11 @@ from pimann.data_check import (
     read_manifest,
     stage_problems,
 )
-from pimann.errors import PimannError
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT, shared_dir
-from pimann.robot import MESH_DIRS, MODEL_FILES
-from pimann.stage import stage_entry
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT, shared_dir
+from pimann.core.robot import MESH_DIRS, MODEL_FILES
+from pimann.core.stage import stage_entry
 
 BANDAI = "mocap:bandai_namco"
 
@@ -34,7 +34,7 @@ BANDAI = "mocap:bandai_namco"
 def test_the_shared_folder_matches_the_manifest():
     groups = read_manifest()
     assert check_groups(groups.values()) == []
-    assert stage_problems((MOCAP, "robot", "simulation")) == []
+    assert stage_problems((MOCAP, "robot", "simulation"), load_params()) == []
     sources = load_params().data.sources
     assert {f"mocap:{key}" for key in sources} | {"robot", "simulation"} == set(groups)
     paths = {entry.path for group in groups.values() for entry in group.files}

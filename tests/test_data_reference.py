@@ -1,4 +1,5 @@
-"""The data's own level of the sliding metrics (pimann.data_reference) on synthetic clips whose
+"""The data's own level of the sliding metrics (pimann.evaluate.data_reference) on synthetic clips
+whose
 answer is known: the standing robot slid along its heading at a known speed."""
 
 from __future__ import annotations
@@ -6,37 +7,16 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
-import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS
+from builders import (
+    EVALUATE_PARAMS,
+    walking_clip,  # noqa: F401
+)
 
-from pimann.data_reference import FRAMES, clip_reference, data_reference
-from pimann.features import split_sources
-from pimann.params import load_params
-from pimann.robot import load_robot
-from pimann.trajectory import Trajectory, write_collection
-
-RATE = 50.0
-HEADING = 0.4
-
-
-def walking_clip(speed: float, frames: int, source: str, contacts: bool | None = None):
-    """The standing robot (both feet on the floor) slid along its heading at `speed` m/s."""
-    robot = load_robot("retarget")
-    q = robot.standing_configuration()
-    _, quaternion, joints = robot.split_configuration(q)
-    t = np.arange(frames) / RATE
-    forward = np.array([np.cos(HEADING), np.sin(HEADING), 0.0])
-    turned = pin.Quaternion(pin.utils.rotate("z", HEADING) @ pin.Quaternion(quaternion).matrix())
-    return Trajectory(
-        time=t,
-        base_position=q[:3] + speed * t[:, None] * forward,
-        base_quaternion_xyzw=np.tile(turned.coeffs(), (frames, 1)),
-        joint_positions=np.tile(joints, (frames, 1)),
-        source=source,
-        rate_hz=RATE,
-        contacts=None if contacts is None else np.full((frames, 2), contacts),
-    )
+from pimann.core.params import load_params
+from pimann.core.trajectory import write_collection
+from pimann.evaluate.data_reference import FRAMES, clip_reference, data_reference
+from pimann.learn.features import split_sources
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +26,9 @@ def params():
 
 def test_a_sliding_clip_scores_its_speed_per_500_frames(params):
     # both feet in contact slide at 0.6 m/s: RMS over 3 components 0.6 / sqrt(3) every frame
-    row = clip_reference(walking_clip(0.6, 300, "a", contacts=False), params.evaluate)
+    row = clip_reference(
+        walking_clip(0.6, 300, "a", contacts=False), params.evaluate, params.contacts
+    )
     assert row["forward_frames"] == 300 and row["frames"] == 300
     expected = FRAMES * 0.6 / np.sqrt(3)
     for name in ("linear_position", "linear_position_world"):
@@ -59,7 +41,7 @@ def test_a_sliding_clip_scores_its_speed_per_500_frames(params):
 
 
 def test_only_forward_frames_count(params):
-    standing = clip_reference(walking_clip(0.0, 300, "s"), params.evaluate)
+    standing = clip_reference(walking_clip(0.0, 300, "s"), params.evaluate, params.contacts)
     assert standing["forward_frames"] == 0 and standing["support_rmse_linear_total"] is None
 
 

@@ -8,46 +8,20 @@ import math
 
 import numpy as np
 import pytest
-from conftest import EVALUATE_PARAMS
-from scipy.spatial.transform import Rotation
+from builders import EVALUATE_PARAMS, RATE, make_trajectory
 
-from pimann import data_report as dr
-from pimann import data_report_output as dro
-from pimann import motion_classes as mc
-from pimann.metrics import trajectory_metrics
-from pimann.params import load_params
-from pimann.robot import STANDING_BASE_HEIGHT, STANDING_BASE_QUATERNION_XYZW, STANDING_JOINTS
-from pimann.trajectory import Trajectory, write_collection
-
-RATE = 50.0
+from pimann.core.params import load_params
+from pimann.core.robot import STANDING_JOINTS
+from pimann.core.trajectory import Trajectory, write_collection
+from pimann.evaluate import data_report as dr
+from pimann.evaluate import data_report_output as dro
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.learn import motion_classes as mc
 
 
 @pytest.fixture(scope="module")
 def params():
     return dataclasses.replace(load_params(), evaluate=EVALUATE_PARAMS)
-
-
-def make_trajectory(xy, yaw=0.0, z=0.0, contacts=None, joints=None, **attrs) -> Trajectory:
-    """The standing robot (feet on the floor at z = 0) moved rigidly along xy (T, 2) and
-    turned to yaw, lifted by z."""
-    xy = np.asarray(xy, dtype=float)
-    n = len(xy)
-    yaw = np.broadcast_to(np.asarray(yaw, dtype=float), (n,))
-    z = np.broadcast_to(np.asarray(z, dtype=float), (n,))
-    standing = Rotation.from_quat(STANDING_BASE_QUATERNION_XYZW)
-    quaternions = (Rotation.from_euler("z", yaw[:, None]) * standing).as_quat()
-    position = np.column_stack([xy, STANDING_BASE_HEIGHT + z])
-    joints = np.tile(STANDING_JOINTS, (n, 1)) if joints is None else joints
-    return Trajectory(
-        time=np.arange(n) / RATE,
-        base_position=position,
-        base_quaternion_xyzw=quaternions,
-        joint_positions=joints,
-        source=attrs.pop("source", "synthetic.bvh"),
-        rate_hz=RATE,
-        contacts=contacts,
-        attrs=attrs,
-    )
 
 
 def line(speed: float, direction: float, seconds: float, start=(0.0, 0.0)) -> np.ndarray:
@@ -151,16 +125,17 @@ def test_sliding_of_a_foot_sliding_at_a_known_speed(params):
 
 
 def test_sliding_is_the_evaluate_stage_metric(robot, params, rng):
-    """Per clip, the frames sum to pimann.metrics' total RMSE, under either contact rule."""
+    """Per clip, the frames sum to pimann.evaluate.metrics' total RMSE, under either contact
+    rule."""
     n = 150
     joints = STANDING_JOINTS + 0.1 * np.sin(np.arange(n)[:, None] / 9.0 + rng.uniform(0, 6, 26))
     contacts = rng.random((n, 2)) < 0.6
     trajectory = make_trajectory(line(0.4, 0.2, n / RATE), yaw=0.2, contacts=contacts,
                                  joints=joints)  # fmt: skip
     frames = dr.clip_frames("clip", trajectory, params)
-    file = trajectory_metrics(trajectory, robot, params.evaluate)
+    file = trajectory_metrics(trajectory, robot, params.evaluate, params.contacts)
     detected = trajectory_metrics(
-        dataclasses.replace(trajectory, contacts=None), robot, params.evaluate
+        dataclasses.replace(trajectory, contacts=None), robot, params.evaluate, params.contacts
     )
     assert detected["contacts_source"] == "detected"
     for kind in ("linear", "angular"):

@@ -5,7 +5,7 @@ unseen (stale outputs), and a module listed that the stage never imports reruns 
 nothing (a rollout or MuJoCo run redone after a reworded claim). The import closure of each
 stage script over the pimann package is read statically (`ast`, every import in the module,
 function bodies included) and compared with the stage's deps; the shared files read through
-pimann.robot's MODEL_FILES / MESH_DIRS / load_robot and pimann.paths.resolve_shared
+pimann.core.robot's MODEL_FILES / MESH_DIRS / load_robot and pimann.core.paths.resolve_shared
 (params.yaml data.sources) must be listed as `../shared/...` paths.
 """
 
@@ -20,17 +20,21 @@ from pathlib import Path, PurePosixPath
 import pytest
 import yaml
 
-from pimann.paths import PACKAGE_CHECKOUT, shared_dir
-from pimann.robot import MESH_DIRS, MODEL_FILES, load_robot
+from pimann.core.paths import PACKAGE_CHECKOUT, shared_dir
+from pimann.core.robot import MESH_DIRS, MODEL_FILES, load_robot
 
 ROOT = PACKAGE_CHECKOUT
 PACKAGE = "pimann"
 SHARED_DEP = "../shared"  # the default shared folder beside the checkout, as dvc.yaml names it
 CODE_PREFIXES = (f"{PACKAGE}/", "stages/")
 # Reading a rollout must not rerun when the claims or their evaluation are reworded.
-DATA_CHECK = f"{PACKAGE}/data_check.py"
-PATHS = f"{PACKAGE}/paths.py"
-EVALUATION_MODULES = ("pimann/evaluate.py", "pimann/claims.py", "pimann/claim_rules.py")
+DATA_CHECK = f"{PACKAGE}/core/data_check.py"
+PATHS = f"{PACKAGE}/core/paths.py"
+EVALUATION_MODULES = (
+    "pimann/evaluate/evaluation.py",
+    "pimann/evaluate/claims.py",
+    "pimann/evaluate/claim_rules.py",
+)
 GENERATION_STAGES = ("rollout", "rollout_baseline", "simulate")
 
 
@@ -338,7 +342,7 @@ def test_shared_reads_follow_the_robot_variants():
         f"robots/{MODEL_FILES['simulation']}",
         f"robots/{MESH_DIRS['simulation']}",
     }
-    assert set(shared_reads({ROOT / "pimann/generate.py"}, params)) == {
+    assert set(shared_reads({ROOT / "pimann/generate/generator.py"}, params)) == {
         f"robots/{MODEL_FILES['retarget']}"
     }
     clips = set(shared_reads({ROOT / "pimann/mocap/clips.py"}, params))
@@ -358,9 +362,36 @@ def test_trainings_list_every_train_setting_that_changes_a_model(name):
     unseen (the models of the other value kept): each one is a param of both trainings."""
     import dataclasses
 
-    from pimann.params import TrainParams
+    from pimann.core.params import TrainParams
 
     listed = set(_dvc_stages()[name]["params"])
     wanted = {f"train.{f.name}" for f in dataclasses.fields(TrainParams)}
     wanted -= {f"train.{key}" for key in TRAIN_NOT_RESULT}
     assert not wanted - listed, f"{name}: params not listed in dvc.yaml: {sorted(wanted - listed)}"
+
+
+def _stages_listing(module: str) -> set[str]:
+    """The stages a code edit of `module` reruns directly (its deps cover the file)."""
+    params = _params()
+    return {
+        name
+        for name, stage in _dvc_stages().items()
+        if any(_covers(_interpolate(_dep_path(dep), params), module) for dep in stage["deps"])
+    }
+
+
+def test_editing_the_steering_law_reruns_the_rollouts_and_no_training():
+    """The steering law acts at generation (paper Sec. IV): its rollouts rerun, and what reads
+    them after, but never the features or a training, which lie upstream."""
+    reruns = _stages_listing("pimann/generate/steering.py")
+    assert {"rollout", "rollout_baseline"} <= reruns
+    assert not reruns & {"retarget", "data_report", "features", "train", "train_baseline"}
+
+
+def test_rewording_a_claim_reruns_the_evaluation_onward_only():
+    """The claims are judged by the evaluate stage; the data report, generation and the
+    trainings never import them."""
+    for module in ("pimann/evaluate/claims.py", "pimann/evaluate/claim_rules.py"):
+        reruns = _stages_listing(module)
+        assert "evaluate" in reruns, module
+        assert reruns <= {"evaluate", "figures", "report"}, f"{module} reruns {sorted(reruns)}"

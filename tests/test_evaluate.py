@@ -9,27 +9,30 @@ import json
 import numpy as np
 import pandas as pd
 import pytest
-import torch
-from test_claims import REFERENCE, crafted_metrics
-from test_rollouts import benchmark_collection
+from builders import (
+    REFERENCE,
+    benchmark_collection,
+    crafted_metrics,
+    tiny_models,  # noqa: F401
+)
 
-from pimann.claims import claims_markdown
-from pimann.command_following import summarise_following
-from pimann.errors import PimannError
-from pimann.evaluate import (
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.trajectory import read_trajectory
+from pimann.evaluate.claims import claims_markdown
+from pimann.evaluate.command_following import summarise_following
+from pimann.evaluate.evaluation import (
     evaluate_all,
     provenance,
-    read_metrics,
     representative_seed,
     summarise,
     write_results,
 )
-from pimann.key_metrics import following_metrics
-from pimann.metrics import trajectory_metrics
-from pimann.params import load_params
-from pimann.rollout_layout import BASELINE, read_script, select_rows
-from pimann.rollouts import run_rollouts
-from pimann.trajectory import read_trajectory
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.evaluate.results import read_metrics
+from pimann.generate.rollout_layout import BASELINE, read_script, select_rows
+from pimann.generate.rollouts import run_rollouts
+from pimann.report.key_metrics import following_metrics
 
 
 @pytest.fixture(scope="module")
@@ -70,7 +73,7 @@ def test_results_record_provenance(params, tmp_path):
     summary = json.loads((tmp_path / "metrics_summary.json").read_text())
     assert summary["data_reference"] == REFERENCE
     assert summary["provenance"]["profile"] == params.profile
-    assert summary["provenance"]["params"]["figures"]["pi_weight"] == params.figures.pi_weight
+    assert summary["provenance"]["params"]["evaluate"]["pi_weight"] == params.evaluate.pi_weight
     text = (tmp_path / "claims.md").read_text()
     assert f"Profile **{params.profile}**" in text and '"profile": ' in text.splitlines()[1]
     assert text.count("| C") == len(claims) and "**holds**" in text
@@ -82,29 +85,8 @@ def test_results_record_provenance(params, tmp_path):
         assert metric in summary["summary"]["forward"]["nosteering"]["w10"]["metrics"]
 
 
-def _tiny_models(root, weight: float, variant: str, seeds):
-    from pimann.feature_layout import FeatureLayout, Normalisation
-    from pimann.mann import MANN
-    from pimann.model_files import save_model
-    from pimann.params import ModelParams
-
-    layout = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, variant)
-    small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
-    for seed in seeds:
-        torch.manual_seed(seed)
-        model = MANN(layout.input_dim, layout.output_dim, small, seeds=[seed])
-        stats = Normalisation(
-            np.zeros(layout.input_dim), np.ones(layout.input_dim),
-            np.zeros(layout.output_dim), 0.01 * np.ones(layout.output_dim),
-        )  # fmt: skip
-        meta = {"pi_weight": weight, "seed": seed, "variant": variant, "epochs": 3,
-                "best_epoch": 2, "train_clips": ["a", "b"], "test_clips": ["c"],
-                "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
-        save_model(root / str(seed), model, layout, stats, meta)
-
-
 def test_rollout_and_evaluate_end_to_end(params, tmp_path):
-    from pimann.params import MotionSegment
+    from pimann.core.params import MotionSegment
 
     # the data's level: one clip at 0.5 m/s (5 s of forward walking), one standing; the test
     # clips (benchmark scripts): a 2 s walk at 0.4 m/s and its 'mirror'; the training clips'
@@ -122,8 +104,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
         ),
         figures=dataclasses.replace(params.figures, scenario="short"),
     )
-    _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
-    _tiny_models(tmp_path / "models" / "baseline", 0.0, "ground_projected", [0])
+    tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
+    tiny_models(tmp_path / "models" / "baseline", 0.0, "ground_projected", [0])
     rollouts = tmp_path / "rollouts"
     for name in ("w10", "baseline"):
         written = run_rollouts(tmp_path / "models" / name, rollouts / name, short, workers=1)
@@ -143,7 +125,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert len(frame) == 30 and set(frame["model"]) == {"w10", BASELINE}
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
     row = select_rows(frame, "short", True, model="w10", seed=1).iloc[0]
-    expected = trajectory_metrics(first, params=short.evaluate)
+    expected = trajectory_metrics(first, None, short.evaluate, short.contacts)
     assert row["support_rmse_linear_total"] == pytest.approx(
         expected["support_rmse_linear_total"], rel=1e-5
     )
@@ -202,16 +184,16 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
 
 def test_worker_errors_reach_the_caller_with_file_and_frame(params, tmp_path):
     """A PimannError raised in a spawned worker comes back as a PimannError, not a crash."""
-    from pimann.evaluate import _metrics_job
-    from pimann.parallel import pool_map
+    from pimann.core.parallel import pool_map
+    from pimann.evaluate.evaluation import _metrics_job
 
     missing = tmp_path / "nope.h5"
     with pytest.raises(PimannError, match="nope.h5: file not found"):
-        pool_map(_metrics_job, [(missing, params.evaluate)] * 2, 2, "metrics")
+        pool_map(_metrics_job, [(missing, params.evaluate, params.contacts)] * 2, 2, "metrics")
 
 
 def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp_path):
-    from pimann.params import MotionSegment
+    from pimann.core.params import MotionSegment
 
     short = dataclasses.replace(
         params,
@@ -221,7 +203,7 @@ def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp
         ),
     )  # fmt: skip
     models = tmp_path / "models" / "w10"
-    _tiny_models(models, 10.0, "full", [0, 1])
+    tiny_models(models, 10.0, "full", [0, 1])
     broken = models / "1" / "model.pt"
     broken.write_bytes(broken.read_bytes()[:100])  # truncated
     out = tmp_path / "rollouts" / "w10"

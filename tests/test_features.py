@@ -3,65 +3,28 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pinocchio as pin
 import pytest
+from builders import (
+    BROKEN_FEATURES,
+    PITCH,
+    RATE,
+    break_features,
+    synthetic_clip,
+    synthetic_collection,
+)
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
-from pimann.feature_layout import FeatureLayout, window_layout
-from pimann.features import build_dataset, clip_features, read_dataset, split_sources, write_dataset
-from pimann.params import load_params
-from pimann.robot import N_JOINTS, STANDING_JOINTS
-from pimann.trajectory import Trajectory, write_trajectory
-
-RATE = 50.0
-PITCH = 0.3  # a fixed base tilt, so that base and world frames differ in every axis
-
-
-def synthetic_clip(
-    frames: int = 200,
-    velocity=(0.4, 0.1, 0.02),
-    yaw_rate: float = 0.5,
-    source: str = "clip",
-    mirrored: bool = False,
-    phase: float = 0.0,
-) -> Trajectory:
-    """Base at constant world velocity, R_t = Rz(yaw_rate t) Ry(PITCH), sinusoidal joints."""
-    time = np.arange(frames) / RATE
-    rotation = Rotation.from_euler("z", (yaw_rate * time)[:, None]) * Rotation.from_euler(
-        "y", PITCH
-    )
-    gait = np.sin(2 * np.pi * 1.1 * time + phase)
-    joints = STANDING_JOINTS + 0.2 * gait[:, None]
-    return Trajectory(
-        contacts=np.stack([gait > -0.3, gait < 0.3], axis=1),  # left, right; double support
-        time=time,
-        base_position=np.array([0.0, 0.0, 0.77]) + time[:, None] * np.asarray(velocity),
-        base_quaternion_xyzw=rotation.as_quat(),
-        joint_positions=joints,
-        source=source,
-        rate_hz=RATE,
-        attrs={"mirrored": mirrored},
-    )
-
-
-def synthetic_collection(n_sources: int = 6, frames: int = 160) -> list[tuple[str, Trajectory]]:
-    """Each source clip and its 'mirror' (here: another phase), as the retarget stage names."""
-    clips = []
-    for k in range(n_sources):
-        for mirrored in (False, True):
-            name = f"src{k}" + ("_mirror" if mirrored else "")
-            clip = synthetic_clip(
-                frames, velocity=(0.2 + 0.1 * k, 0.0, 0.0), yaw_rate=0.1 * (k - 2),
-                source=f"src{k}", mirrored=mirrored, phase=float(mirrored) + k,
-            )  # fmt: skip
-            clips.append((name, clip))
-    return clips
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.robot import N_JOINTS
+from pimann.core.trajectory import Trajectory
+from pimann.learn.dataset import read_dataset, write_dataset
+from pimann.learn.feature_layout import FeatureLayout, window_layout
+from pimann.learn.features import build_dataset, clip_features, split_sources
 
 
 @pytest.fixture(scope="module")
@@ -175,7 +138,7 @@ def test_gravity_pose_input_keeps_height_roll_pitch_and_zeroes_the_rest(params):
     rest[gravity.x_slices["base_position"]] = rest[gravity.x_slices["base_rpy"]] = False
     np.testing.assert_array_equal(x[:, rest], x_world[:, rest])
     assert np.ptp(x_world[:, world.x_slices["base_position"]][:, 0]) > 0.5
-    with pytest.raises(PimannError, match="pose_input"):
+    with pytest.raises((PimannError, ValueError), match="pose_input"):  # params refuse it
         window_layout(dataclasses.replace(params.features, pose_input="nope"), RATE, "full")
 
 
@@ -245,7 +208,7 @@ def test_split_holds_out_every_class_in_different_styles(params):
 
 
 def test_a_clip_class_is_its_walking_majority_unless_it_mostly_stands():
-    from pimann.motion_classes import CLASSES, majority_class
+    from pimann.learn.motion_classes import CLASSES, majority_class
 
     def counts(**frames):
         return np.array([frames.get(name, 0) for name in CLASSES])
@@ -257,7 +220,7 @@ def test_a_clip_class_is_its_walking_majority_unless_it_mostly_stands():
 
 
 def test_settled_contacts_drop_frames_around_switches():
-    from pimann.features import settled_contacts
+    from pimann.learn.features import settled_contacts
 
     left = np.array([1, 1, 1, 0, 0, 1, 1, 1, 1, 1, 0], bool)
     flags = np.stack([left, np.ones_like(left)], axis=1)
@@ -268,7 +231,7 @@ def test_settled_contacts_drop_frames_around_switches():
 
 
 def test_normalisation_uses_training_statistics_only(params, tmp_path):
-    from pimann.features import write_dataset
+    from pimann.learn.dataset import write_dataset
 
     clips = synthetic_collection(n_sources=6)
     dataset = build_dataset(clips, params.features, "full")
@@ -316,111 +279,6 @@ def write_small_dataset(path: Path) -> Path:
     return path
 
 
-def _h5(edit):
-    """A breaker that edits the HDF5 file in place."""
-
-    def apply(path: Path) -> None:
-        with h5py.File(path, "r+") as file:
-            edit(file)
-
-    return apply
-
-
-def _replace(name: str, change):
-    """Dataset `name` rewritten as change(its values)."""
-
-    def edit(file: h5py.File) -> None:
-        values = change(file[name][()])
-        del file[name]
-        file.create_dataset(name, data=values)
-
-    return _h5(edit)
-
-
-def _set(name: str, index: tuple, value: float):
-    def change(values: np.ndarray) -> np.ndarray:
-        values[index] = value
-        return values
-
-    return _replace(name, change)
-
-
-def _delete(name: str):
-    return _h5(lambda file: file.__delitem__(name))
-
-
-def _attr(name: str, value=None):
-    """Attribute `name` set to `value`, or deleted (None)."""
-
-    def edit(file: h5py.File) -> None:
-        if value is None:
-            del file.attrs[name]
-        else:
-            file.attrs[name] = value
-
-    return _h5(edit)
-
-
-def _layout(**changes):
-    """The layout attribute with `changes` (None: the key removed)."""
-
-    def edit(file: h5py.File) -> None:
-        raw = {**json.loads(file.attrs["layout"]), **changes}
-        file.attrs["layout"] = json.dumps({k: v for k, v in raw.items() if v is not None})
-
-    return _h5(edit)
-
-
-def _bytes(change):
-    return lambda path: path.write_bytes(change(path.read_bytes()))
-
-
-# kind: (how a good feature file is broken, what the error says)
-BROKEN_FEATURES = {
-    "empty": (_bytes(lambda data: b""), "cannot open"),
-    "truncated": (_bytes(lambda data: data[: len(data) // 2]), "cannot open"),
-    "text": (_bytes(lambda data: b"X_train,Y_train\n1,2\n"), "cannot open"),
-    "trajectory": (
-        lambda path: write_trajectory(path, synthetic_clip()),
-        r"not a feature dataset \(lacks \['X_train'",
-    ),
-    "no_origin": (_delete("test_origin"), "lacks.*test_origin"),
-    "no_clips": (_attr("clips"), "lacks.*attribute clips"),
-    "layout_not_json": (_attr("layout", "{input_offsets"), "attribute layout: not a feature"),
-    "layout_lacks_variant": (_layout(variant=None), "layout.*missing.*'variant'"),
-    "layout_lacks_offsets": (_layout(output_offsets=None), "layout lacks 'output_offsets'"),
-    "layout_unknown_key": (_layout(depth=3), "layout.*depth"),
-    "layout_bad_variant": (_layout(variant="sideways"), "variant 'sideways'"),
-    "layout_other_window": (
-        _layout(input_offsets=[-10, 0, 10]),
-        r"X_mean is \(130,\) float64; the layout needs \(76,\)",
-    ),
-    "wrong_shape": (
-        _replace("X_train", lambda x: x[:, :-1]),
-        r"X_train is \(\d+, 129\) float32; the layout needs \(N, 130\)",
-    ),
-    "other_count": (_replace("Y_test", lambda y: y[:-1]), r"Y_test is \(\d+, 100\) float32"),
-    "strings": (_replace("X_test", lambda x: np.array([b"a", b"b"])), "X_test.*numbers"),
-    "nan": (_set("X_train", (3, 5), np.nan), r"\(frame 3\): X_train holds NaN"),
-    "nan_stats": (_set("Y_std", (4,), np.inf), "Y_std holds NaN"),
-    "zero_std": (_set("X_std", (0,), 0.0), "X_std or Y_std holds values <= 0"),
-    "origin_range": (_set("train_origin", (0, 0), 99), "train_origin names clips beyond"),
-    "contacts_shape": (
-        _replace("train_contacts", lambda c: np.concatenate([c, c[:, :1]], axis=1)),
-        r"train_contacts is \(\d+, 3\) bool",
-    ),
-    "standing_not_json": (_attr("standing", "{joints"), "standing is not JSON"),
-    "sources_count": (_attr("sources", ["a"]), "clips but 1 sources"),
-}
-
-
-def break_features(path: Path, kind: str) -> str:
-    """Break the good feature file at `path` as `kind`; what the error must say."""
-    breaker, message = BROKEN_FEATURES[kind]
-    breaker(path)
-    return message
-
-
 @pytest.fixture(scope="module")
 def small_dataset(tmp_path_factory) -> bytes:
     return write_small_dataset(tmp_path_factory.mktemp("features") / "full.h5").read_bytes()
@@ -441,7 +299,7 @@ def test_time_reversed_training_clips_walk_backward_beside_their_original(params
     """Forward clips played backward: the same poses in reverse order, their features those of
     backward walking (the window's velocities negated and reversed), on the original's side of
     the split; test clips are never reversed."""
-    from pimann.features import time_reversed
+    from pimann.learn.features import time_reversed
 
     clip = synthetic_clip(200, np.array([0.5, 0.0, 0.0]), 0.0, source="walker")
     back = time_reversed(clip)

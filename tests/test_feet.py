@@ -7,9 +7,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pimann.intervals import true_runs
+from pimann.core.contacts import true_runs
+from pimann.core.params import load_params
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
-from pimann.params import load_params
 from pimann.retarget.feet import (
     SWING_VERTICAL,
     bridge_flights,
@@ -21,7 +22,6 @@ from pimann.retarget.feet import (
     step_pivots,
 )
 from pimann.retarget.ik import RetargetIK
-from pimann.robot import SEGMENTS
 
 RATE = 50.0
 
@@ -167,7 +167,7 @@ def test_planted_soles_hold_and_the_base_gives_way(robot, params):
 
 
 def _corner_heights(robot, q) -> np.ndarray:
-    from pimann.robot import SOLE_CORNERS
+    from pimann.core.robot import SOLE_CORNERS
 
     heights = []
     for frame in ("l_sole", "r_sole"):

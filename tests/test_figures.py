@@ -8,15 +8,22 @@ import logging
 
 import h5py
 import numpy as np
-import pandas as pd
 import pytest
-from test_claims import REFERENCE, crafted_metrics
+from builders import (
+    REFERENCE,
+    crafted_results,  # noqa: F401
+)
 
-from pimann.evaluate import provenance, write_results
-from pimann.figures import FIGURES, fig_foot_heights, load_results, make_figures, save_figure
-from pimann.params import load_params
-from pimann.robot import JOINT_NAMES
-from pimann.rollout_layout import RolloutKey
+from pimann.core.params import load_params
+from pimann.core.robot import JOINT_NAMES
+from pimann.report.figures import (
+    FIGURES,
+    draw,
+    fig_foot_heights,
+    load_results,
+    make_figures,
+    save_figure,
+)
 
 
 @pytest.fixture(scope="module")
@@ -24,52 +31,10 @@ def params():
     return load_params()
 
 
-def crafted_results(root, params, profile: str = "quick", sim: bool = True, data: bool = True):
-    """results/ as the evaluate stage writes it, with sinusoidal time series."""
-    frame = crafted_metrics()
-    selection = {
-        "base_baseline": RolloutKey("baseline", 2, "forward", False),
-        "base_pi": RolloutKey("w10", 2, "forward", False),
-        "base_pi_steering": RolloutKey("w10", 2, "forward", True),
-        **{f"feet_w{w}": RolloutKey(f"w{w}", 2, "forward", False) for w in (0, 1, 10, 20, 100)},
-    }
-    info = {**provenance(params), "profile": profile}
-    write_results(frame, root, params, info, selection, REFERENCE if data else None)
-    t = np.arange(500) / 50.0
-    (root / "timeseries").mkdir()
-    for k, name in enumerate(("base_baseline", "base_pi", "base_pi_steering")):
-        pd.DataFrame(
-            {"time": t, "base_x": 0.4 * t, "base_y": 0.02 * k * t, "base_z": 0.01 * np.sin(t),
-             "base_roll": 0.01 * np.sin(3 * t), "base_pitch": 0.02 * np.cos(3 * t),
-             "base_yaw": 0.01 * k * t}
-        ).to_csv(root / "timeseries" / f"{name}.csv", index=False)  # fmt: skip
-    for w in (0, 1, 10, 20, 100):
-        phase = 2 * np.pi * t
-        pd.DataFrame(
-            {"time": t,
-             "left_foot_height": np.maximum(0, 0.05 * np.sin(phase)),
-             "right_foot_height": np.maximum(0, -0.05 * np.sin(phase)),
-             "left_sole_pitch": 0.002 * w * np.sin(phase),
-             "right_sole_pitch": -0.002 * w * np.sin(phase),
-             "left_contact": (np.sin(phase) <= 0).astype(int),
-             "right_contact": (np.sin(phase) >= 0).astype(int)}
-        ).to_csv(root / "timeseries" / f"feet_w{w}.csv", index=False)  # fmt: skip
-    if sim:
-        (root / "sim").mkdir()
-        with h5py.File(root / "sim" / "mixed.h5", "w") as file:
-            reference = 0.1 * np.sin(t[:, None] + np.arange(26))
-            file["time"] = t
-            file["joints_reference"] = reference
-            file["joints_measured"] = reference + 0.01
-            file["joints_generated"] = reference - 0.01
-            file.attrs["joint_names"] = list(JOINT_NAMES)
-    return root
-
-
 def test_every_figure_is_written_with_provenance(params, tmp_path):
     results = crafted_results(tmp_path / "results", params)
     out = tmp_path / "figures"
-    written = make_figures(results, out, params.figures)
+    written = make_figures(results, out, params.figures, params.evaluate.pi_weight)
     assert set(written) == set(FIGURES)
     for name in FIGURES:
         pdf, png = (out / f"{name}.{fmt}" for fmt in ("pdf", "png"))
@@ -95,8 +60,8 @@ def test_missing_data_skips_the_figure(params, tmp_path, caplog):
     results = crafted_results(tmp_path / "results", params, sim=False)
     for path in (results / "timeseries").glob("feet_*.csv"):
         path.unlink()
-    caplog.set_level(logging.INFO, logger="pimann.figures")
-    written = make_figures(results, tmp_path / "out", params.figures)
+    caplog.set_level(logging.INFO, logger="pimann.report.figures")
+    written = make_figures(results, tmp_path / "out", params.figures, params.evaluate.pi_weight)
     assert set(written) == set(FIGURES) - {"joint_tracking", "foot_rotations", "foot_heights"}
     assert "joint_tracking: no simulation traces" in caplog.text
 
@@ -137,8 +102,8 @@ def test_figures_follow_params(params, tmp_path):
 def test_legends_sit_outside_the_axes(params, tmp_path):
     """No legend inside an axes (they covered the data); one figure legend each instead."""
     results = load_results(crafted_results(tmp_path / "results", params))
-    for name, function in FIGURES.items():
-        fig = function(results, params.figures)
+    for name in FIGURES:
+        fig = draw(name, results, params.figures, params.evaluate.pi_weight)
         assert all(ax.get_legend() is None for ax in fig.axes), name
         assert len(fig.legends) == 1, name
 
@@ -160,7 +125,7 @@ def test_contact_shading_and_reference_trace_are_visible(params, tmp_path):
     heights = FIGURES["foot_heights"](results, params.figures)
     labels = [t.get_text() for t in heights.legends[0].get_texts()]
     assert labels == ["left", "right", "left in contact", "right in contact"]
-    tracking = FIGURES["joint_tracking"](results, params.figures)
+    tracking = FIGURES["joint_tracking"](results, params.figures, params.evaluate.pi_weight)
     order = {line.get_label(): line.get_zorder() for line in tracking.axes[0].get_lines()}
     assert order["reference"] > order["measured"]  # the reference is drawn over the measured
 
@@ -186,7 +151,7 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
             file[key] = source[key][()]
         file["joints_measured"] = source["joints_reference"][()] + 0.05  # tracks worse
         file.attrs["joint_names"] = list(JOINT_NAMES)
-    fig = FIGURES["joint_tracking"](load_results(root), params.figures)
+    fig = FIGURES["joint_tracking"](load_results(root), params.figures, params.evaluate.pi_weight)
     titles = [ax.get_title() for ax in fig.axes]
     assert len(titles) == 8 and titles[0].endswith(", offline") and titles[1].endswith(", online")
     assert "offline and online" in fig._suptitle.get_text()

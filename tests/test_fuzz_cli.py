@@ -12,13 +12,13 @@ import shutil
 import h5py
 import numpy as np
 import pytest
-from test_train import BROKEN_MODELS, break_model, save_small_model
+from builders import BROKEN_MODELS, break_model, save_small_model
 
 from pimann.cli import main
-from pimann.params import load_params
-from pimann.paths import shared_dir
-from pimann.robot import STANDING_JOINTS
-from pimann.trajectory import Trajectory, write_trajectory
+from pimann.core.params import load_params
+from pimann.core.paths import shared_dir
+from pimann.core.robot import STANDING_JOINTS
+from pimann.core.trajectory import Trajectory, write_trajectory
 
 BVH = next(iter(sorted((shared_dir() / "data" / "mocap" / "bandai-namco").rglob("*.bvh"))))
 
@@ -150,7 +150,7 @@ def test_broken_model(tmp_path, capsys, small_model, kind):
 
 
 def test_an_error_is_one_line_whatever_the_library_said():
-    from pimann.errors import PimannError
+    from pimann.core.errors import PimannError
 
     error = PimannError("model.pt", "unpickling failed:\n  line 1\n\tline 2", frame=3)
     assert str(error) == "model.pt (frame 3): unpickling failed: line 1 line 2"

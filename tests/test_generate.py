@@ -9,149 +9,37 @@ contact check trains a tiny MANN on features of that gait and rolls it out.
 from __future__ import annotations
 
 import dataclasses
-import math
 
 import numpy as np
 import pinocchio as pin
 import pytest
 import torch
+from builders import IDENTITY, LAYOUT, GaitModel, roll
 from scipy.spatial.transform import Rotation
-from torch import nn
 
-from pimann.contacts import detect_contacts, foot_kinematics, trajectory_configurations
-from pimann.errors import PimannError
-from pimann.feature_layout import FeatureLayout, Normalisation
-from pimann.features import clip_features, matrix_to_rpy
-from pimann.future_window import interpolation
-from pimann.generate import (
+from pimann.core.contacts import detect_contacts, foot_kinematics, trajectory_configurations
+from pimann.core.errors import PimannError
+from pimann.core.params import ModelParams, MotionSegment, StandSegment, load_params
+from pimann.core.robot import JOINT_NAMES, STANDING_JOINTS
+from pimann.core.rotations import matrix_to_rpy, yaw_of
+from pimann.core.trajectory import read_trajectory
+from pimann.generate.generator import (
     generate,
     generate_file,
     generate_rollout,
     scenario_steps,
 )
-from pimann.mann import MANN
-from pimann.params import ModelParams, MotionSegment, StandSegment, load_params
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
-from pimann.rotations import yaw_of
-from pimann.trajectory import read_trajectory
+from pimann.learn.feature_layout import Normalisation
+from pimann.learn.features import clip_features
+from pimann.learn.future_window import interpolation
+from pimann.learn.mann import MANN
 
-LAYOUT = FeatureLayout(tuple(range(-50, 61, 10)), tuple(range(0, 61, 10)), 50.0, "full")
-IDENTITY = Normalisation(
-    np.zeros(LAYOUT.input_dim),
-    np.ones(LAYOUT.input_dim),
-    np.zeros(LAYOUT.output_dim),
-    np.ones(LAYOUT.output_dim),
-)
-NECK = [JOINT_NAMES.index("neck_pitch"), JOINT_NAMES.index("neck_roll")]
 FORWARD = [MotionSegment(10.0, 0.5, 0.0, 0.0)]
 
 
 @pytest.fixture(scope="module")
 def params():
     return load_params()
-
-
-def crouched_legs(robot, drop: float = 0.06) -> tuple[np.ndarray, np.ndarray]:
-    """Standing joints with both soles `drop` higher in the base frame (knees bent, feet flat),
-    by Newton steps on the 6-joint legs, and each leg's joints per sole displacement there
-    (2, 6, 3): away from the straight-knee singularity, so small displacements stay small."""
-    joints = STANDING_JOINTS.copy()
-    legs = ((LEFT_SOLE, slice(0, 6)), (RIGHT_SOLE, slice(6, 12)))
-    base = [0.0, 0.0, 0.0], [0.0, 0.0, 0.0, 1.0]
-    targets = []
-    for frame, _ in legs:
-        placement = robot.frame_placement(robot.configuration(*base, joints), frame)
-        placement.translation = placement.translation + np.array([0.0, 0.0, drop])
-        targets.append(placement)
-    for _ in range(20):
-        q = robot.configuration(*base, joints)
-        for (frame, part), target in zip(legs, targets, strict=True):
-            error = pin.log6(robot.frame_placement(q, frame).actInv(target)).vector
-            jacobian = robot.frame_jacobian(q, frame, pin.LOCAL)[:, 6:][:, part]
-            joints[part] += np.linalg.solve(jacobian, error)
-    q = robot.configuration(*base, joints)
-    inverse = [
-        np.linalg.inv(robot.frame_jacobian(q, frame, pin.LOCAL_WORLD_ALIGNED)[:, 6:][:, part])
-        for frame, part in legs
-    ]
-    return joints, np.stack(inverse)[:, :, :3]
-
-
-class GaitModel(nn.Module):
-    """A periodic stepping gait as a pure function of x (physical units, identity stats).
-
-    Phase phi: the angle of the neck joints' offset from standing (0 at standing), advanced by
-    omega dt each step. Feet (relative to the base) swing on x and y by the mean commanded
-    velocity of the input window's future half times the half period, and lift in their swing
-    half; joints by the legs' inverse Jacobian at standing (feet kept flat). The predicted base
-    velocities echo the window's future mean; `bias` adds to the lateral and yaw rate outputs.
-    """
-
-    def __init__(self, robot, period=1.0, lift=0.05, bias=(0.0, 0.0), stride=1.0):
-        super().__init__()
-        self.omega, self.lift, self.dt = 2 * math.pi / period, lift, 1 / LAYOUT.rate_hz
-        self.stride = stride  # 0: steps in place whatever the command
-        self.bias = bias
-        crouch, inverse = crouched_legs(robot)
-        self.register_buffer("inverse", torch.tensor(inverse, dtype=torch.float32))
-        self.register_buffer("standing", torch.tensor(STANDING_JOINTS, dtype=torch.float32))
-        self.register_buffer("crouch", torch.tensor(crouch, dtype=torch.float32))
-        self.anchor = nn.Parameter(torch.zeros(1))  # gives generate() a device and dtype
-
-    def _joints(self, phase: torch.Tensor, amplitude: torch.Tensor) -> torch.Tensor:
-        sin, cos = torch.sin(phase), torch.cos(phase)
-        left = torch.stack(
-            [amplitude[:, 0] * sin, amplitude[:, 1] * sin, self.lift * torch.clamp(cos, min=0)], -1
-        )
-        right = torch.stack(
-            [-amplitude[:, 0] * sin, -amplitude[:, 1] * sin, self.lift * torch.clamp(-cos, min=0)],
-            -1,
-        )
-        joints = self.crouch.expand(len(phase), -1).clone()
-        joints[:, 0:6] += left @ self.inverse[0].T
-        joints[:, 6:12] += right @ self.inverse[1].T
-        joints[:, NECK[0]] += 0.05 * cos
-        joints[:, NECK[1]] += 0.05 * sin
-        return joints
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        xs = LAYOUT.x_slices
-        n_future = sum(o > 0 for o in LAYOUT.input_offsets)
-        linear = x[:, xs["base_linear_window"]].view(len(x), -1, 3)[:, -n_future:].mean(1)
-        angular = x[:, xs["base_angular_window"]].view(len(x), -1, 3)[:, -n_future:].mean(1)
-        neck = x[:, xs["joints"]][:, NECK] - self.standing[NECK]
-        phase = torch.atan2(neck[:, 1], neck[:, 0]) + self.omega * self.dt
-        amplitude = linear[:, :2] * (self.stride * math.pi / (2 * self.omega))
-        joints = self._joints(phase, amplitude)
-        velocity = (joints - self._joints(phase - self.omega * self.dt, amplitude)) / self.dt
-        linear = linear + torch.tensor([0.0, self.bias[0], 0.0])
-        angular = angular + torch.tensor([0.0, 0.0, self.bias[1]])
-        n_out = len(LAYOUT.output_offsets)
-        return torch.cat(
-            [
-                linear.repeat(1, n_out),
-                angular.repeat(1, n_out),
-                joints,
-                velocity,
-                x[:, xs["base_position"]],
-                x[:, xs["base_rpy"]],
-            ],
-            dim=1,
-        )
-
-
-def roll(model, scenario, params, steering, robot, stats=IDENTITY, layout=LAYOUT, **changes):
-    rollout_params = dataclasses.replace(params.rollout, **changes)
-    return generate_rollout(
-        model,
-        layout,
-        stats,
-        scenario,
-        rollout_params,
-        steering,
-        robot,
-        contact_params=params.evaluate,
-    )
 
 
 def test_scenario_steps_follow_the_segments():
@@ -180,7 +68,7 @@ def test_gait_walks_forward_with_alternating_contacts(robot, params):
     np.testing.assert_allclose(heights[1:].min(axis=1), 0.0, atol=1e-9)
     # contacts from the streaming trigger equal the whole-trajectory detection
     np.testing.assert_array_equal(
-        trajectory.contacts, detect_contacts(robot, trajectory, params.evaluate)
+        trajectory.contacts, detect_contacts(robot, trajectory, params.contacts)
     )
     swings = [np.flatnonzero(np.diff(trajectory.contacts[:, f].astype(int)) == -1) for f in (0, 1)]
     assert min(len(s) for s in swings) >= 8  # ~one lift-off per foot and second
@@ -344,7 +232,7 @@ def test_trained_mann_steps_with_switching_contacts(robot, params, one_thread):
 
 
 def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, tmp_path):
-    from pimann.model_files import save_model
+    from pimann.learn.model_files import save_model
 
     torch.manual_seed(0)
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
@@ -381,7 +269,7 @@ def test_generate_file_writes_atomically_and_names_bad_scenarios(robot, params, 
         short.rollout,
         False,
         robot,
-        contact_params=params.evaluate,
+        contact_params=params.contacts,
     )
     np.testing.assert_allclose(again.joint_positions, trajectory.joint_positions, atol=1e-6)
 
@@ -398,7 +286,7 @@ def test_ground_projected_baseline_keeps_yaw_only(robot, params):
 
 
 def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
-    from pimann.standing import StandingPose
+    from pimann.learn.standing import StandingPose
 
     nominal = StandingPose.nominal()
     joints = nominal.joints.copy()
@@ -408,7 +296,7 @@ def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
     scenario = [StandSegment(0.2, True), MotionSegment(1.0, 0.4, 0.0, 0.0), StandSegment(1.0, True)]
     rollout = generate_rollout(
         GaitModel(robot), LAYOUT, IDENTITY, scenario, params.rollout, False, robot,
-        contact_params=params.evaluate, standing=standing,
+        contact_params=params.contacts, standing=standing,
     )  # fmt: skip
     trajectory = rollout.trajectory
     np.testing.assert_array_equal(trajectory.joint_positions[0], joints)

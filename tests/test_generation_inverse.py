@@ -11,15 +11,15 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from conftest import EVALUATE_PARAMS
+from builders import CONTACT_PARAMS
 from scipy.spatial.transform import Rotation
 
-from pimann.batch_generate import BatchGenerator, data_start
-from pimann.command_script import ScriptSteps
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import clip_features
-from pimann.params import MotionSegment, load_params
-from pimann.standing import StandingPose
+from pimann.core.params import MotionSegment, load_params
+from pimann.generate.batch_generate import BatchGenerator, data_start
+from pimann.generate.command_script import ScriptSteps
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.features import clip_features
+from pimann.learn.standing import StandingPose
 
 PARAMS = load_params()
 VARIANTS = ("full", "ground_projected")
@@ -90,7 +90,7 @@ def oracle_rollout(robot, clips, starts, variant, steps, joint_velocity_feedback
     )
     generator = BatchGenerator(
         torch.nn.Linear(n_in, n_out), layout, identity, rollout, np.zeros(len(clips), bool),
-        robot, EVALUATE_PARAMS, StandingPose.nominal(),
+        robot, CONTACT_PARAMS, StandingPose.nominal(),
     )  # fmt: skip
     generator.network = oracle = Oracle(rows)
     data_start(clips, starts, generator)
@@ -161,8 +161,8 @@ def test_the_data_satisfies_l_b_only_when_paired_over_one_interval(real_walks):
     paper's pairing, y_i's sample at offset 0, one frame ahead: the leg odometry holds the
     support foot still over each interval, and the retargeted joints' velocities change from
     one interval to the next (IK at 50 Hz)."""
-    from pimann.data_report import _training_loss
-    from pimann.features import settled_contacts
+    from pimann.evaluate.data_report import _training_loss
+    from pimann.learn.features import settled_contacts
 
     layout = layout_of("full")
     clip = real_walks["walk"]

@@ -1,4 +1,5 @@
-"""The study's key numbers (pimann.key_metrics): results/metrics.json, the pipeline's only DVC
+"""The study's key numbers (pimann.report.key_metrics): results/metrics.json, the pipeline's only
+DVC
 metrics, flat and at most a hundred values, from a crafted results/ folder."""
 
 from __future__ import annotations
@@ -7,32 +8,27 @@ import json
 
 import pytest
 import yaml
-from test_claims import AGREEING, REFERENCE
-from test_command_following import crafted_rows
-from test_figures import crafted_results
+from builders import (
+    AGREEING,
+    REFERENCE,
+    SIM_SUMMARY,  # noqa: F401
+    crafted_results,
+    crafted_rows,
+)
 
-from pimann import command_following as cf
-from pimann.claims import HOLDS, evaluate_claims
-from pimann.errors import PimannError
-from pimann.evaluate import read_metrics
-from pimann.key_metrics import (
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.evaluate import command_following as cf
+from pimann.evaluate.claims import HOLDS, evaluate_claims
+from pimann.evaluate.results import read_metrics
+from pimann.report.key_metrics import (
     MAX_VALUES,
     STATUS_CODES,
     key_metrics,
     sim_metrics,
     write_key_metrics,
 )
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-
-SIM_SUMMARY = {
-    "profile": "quick",
-    "params": {"timestep": 0.001},
-    "runs": {
-        "w10-0-mixed-steering": {"model": "w10", "success": True, "fallen": False},
-        "baseline-0-mixed-nosteering": {"model": "baseline", "success": False, "fallen": True},
-    },
-}
 
 
 @pytest.fixture(scope="module")
@@ -59,7 +55,9 @@ def test_key_metrics_are_flat_and_few(params, results, tmp_path):
 
 def test_key_metrics_values(params, results):
     metrics = key_metrics(results, params)
-    claims = evaluate_claims(read_metrics(results / "metrics.csv"), params.figures)
+    claims = evaluate_claims(
+        read_metrics(results / "metrics.csv"), params.figures, params.evaluate.pi_weight
+    )
     assert metrics["claims.total"] == len(claims) == 14
     assert metrics["claims.holding"] == sum(c.status == HOLDS for c in claims) > 0
     for claim in claims:

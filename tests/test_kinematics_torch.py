@@ -7,8 +7,8 @@ import pinocchio as pin
 import pytest
 import torch
 
-from pimann.kinematics_torch import TorchKinematics, rpy_to_matrix
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE
+from pimann.learn.kinematics_torch import TorchKinematics, rpy_to_matrix
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,7 @@ import logging
 
 import pytest
 
-from pimann.logs import (
+from pimann.core.logs import (
     OURS,
     QUIET_LOGGERS,
     logging_levels,

@@ -8,8 +8,8 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from pimann.mann import MANN
-from pimann.params import ModelParams, load_params
+from pimann.core.params import ModelParams, load_params
+from pimann.learn.mann import MANN
 
 IN, OUT = 13, 7
 

@@ -8,23 +8,24 @@ import json
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import EVALUATE_PARAMS, random_configuration
+from builders import CONTACT_PARAMS, EVALUATE_PARAMS, random_configuration
 
-from pimann.contacts import FEET, foot_kinematics, trajectory_configurations
-from pimann.errors import PimannError
-from pimann.manifold_differences import manifold_velocities
-from pimann.metrics import (
+from pimann.core.contacts import FEET, foot_kinematics, trajectory_configurations
+from pimann.core.errors import PimannError
+from pimann.core.params import EvaluateParams
+from pimann.core.robot import JOINT_NAMES, SOLE_HALF_LENGTH
+from pimann.core.trajectory import Trajectory, write_collection, write_trajectory
+from pimann.evaluate.metrics import (
     aggregate,
     in_representation,
     metrics_for_file,
     trajectory_metrics,
     trajectory_time_series,
 )
-from pimann.params import EvaluateParams
-from pimann.robot import JOINT_NAMES, SOLE_HALF_LENGTH
-from pimann.trajectory import Trajectory, write_collection, write_trajectory
+from pimann.evaluate.sliding import manifold_velocities
 
 PARAMS = EVALUATE_PARAMS
+CONTACTS = CONTACT_PARAMS
 RATE = 50.0
 FRAMES = 150
 SQRT3 = np.sqrt(3.0)
@@ -109,7 +110,7 @@ def line_trajectory(robot, heading=0.5, distance=1.5, lateral=0.0, turn=0.0, fra
 
 
 def test_still_support_foot_has_zero_rmse(robot):
-    metrics = trajectory_metrics(stance_trajectory(robot), robot, PARAMS)
+    metrics = trajectory_metrics(stance_trajectory(robot), robot, PARAMS, CONTACTS)
     assert metrics["joint_velocity_gap_rms"] is None  # no joint velocities in the file
     assert metrics["contacts_source"] == "detected"
     # the left foot is in contact throughout, the right one never
@@ -122,7 +123,7 @@ def test_still_support_foot_has_zero_rmse(robot):
     assert metrics["skating_ratio"] == 0.0
     assert metrics["contact_foot_speed_mean"] < 1e-4
     # the body did move: the base is not still
-    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS)
+    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS, CONTACTS)
     assert np.ptp(series["base_x"]) > 0.03 and series["right_foot_height"].min() > 0.05
 
 
@@ -132,7 +133,7 @@ def test_rmse_grows_with_injected_sliding(robot):
     speeds = [0.0, 0.01, 0.05, 0.2]
     totals = []
     for speed in speeds:
-        metrics = trajectory_metrics(stance_trajectory(robot, slide=speed), robot, PARAMS)
+        metrics = trajectory_metrics(stance_trajectory(robot, slide=speed), robot, PARAMS, CONTACTS)
         # a rigid slide at `speed` along the sole's x: RMS over 3 components = speed / sqrt(3)
         expected = FRAMES * speed / SQRT3
         assert metrics["support_rmse_linear_position_left"] == pytest.approx(expected, abs=0.02)
@@ -149,14 +150,16 @@ def test_rmse_grows_with_injected_sliding(robot):
 def test_a_sole_on_its_heel_is_down_by_the_corner_rule_only(robot):
     """The left sole tipped 0.4 rad onto its heel, sliding: its lowest corner is on the floor
     (the evaluate rule: down), its origin 4.6 cm above it (the authors' rule: not down)."""
-    metrics = trajectory_metrics(stance_trajectory(robot, slide=0.05, tip=0.4), robot, PARAMS)
-    series = trajectory_time_series(stance_trajectory(robot, tip=0.4), robot, PARAMS)
+    metrics = trajectory_metrics(
+        stance_trajectory(robot, slide=0.05, tip=0.4), robot, PARAMS, CONTACTS
+    )
+    series = trajectory_time_series(stance_trajectory(robot, tip=0.4), robot, PARAMS, CONTACTS)
     assert series["left_foot_height"].abs().max() < 1e-9
     assert metrics["contact_fraction_left"] == 1.0
     expected = FRAMES * 0.05 / SQRT3
     assert metrics["support_rmse_linear_position_left"] == pytest.approx(expected, abs=0.02)
     assert metrics["support_rmse_linear_position_origin_contacts_left"] == 0.0
-    flat = trajectory_metrics(stance_trajectory(robot, slide=0.05), robot, PARAMS)
+    flat = trajectory_metrics(stance_trajectory(robot, slide=0.05), robot, PARAMS, CONTACTS)
     assert flat["support_rmse_linear_position_origin_contacts_left"] == pytest.approx(
         flat["support_rmse_linear_position_left"], rel=1e-12
     )  # a flat sole: both rules agree
@@ -164,7 +167,7 @@ def test_a_sole_on_its_heel_is_down_by_the_corner_rule_only(robot):
 
 def test_turning_foot_counts_in_angular_rmse(robot):
     spin = 0.5  # rad/s about the sole's z: the sole origin stays put
-    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS)
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS, CONTACTS)
     expected = FRAMES * spin / SQRT3
     assert metrics["support_rmse_angular_position_left"] == pytest.approx(expected, rel=1e-3)
     assert metrics["support_rmse_linear_position_left"] < 0.05  # vs 43 rad/s-frames of turning
@@ -175,7 +178,7 @@ def test_world_representation_is_the_velocity_at_the_origin(robot):
     """The authors' inertial-fixed sole velocity: a sole turning in place at p reads -w x p."""
     spin = 0.5
     world = EvaluateParams(**{**vars(PARAMS), "foot_velocity_frame": "world"})
-    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, world)
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, world, CONTACTS)
     lever = np.hypot(0.3, 0.2)  # the sole stands at (0.3, -0.2, 0)
     expected = FRAMES * spin * lever / SQRT3
     assert metrics["support_rmse_linear_position_left"] == pytest.approx(expected, rel=2e-3)
@@ -187,7 +190,7 @@ def test_world_representation_is_the_velocity_at_the_origin(robot):
 def test_world_columns_whatever_the_params(robot):
     """The authors' representation is reported beside ours: a sole turning in place at p."""
     spin = 0.5
-    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS)
+    metrics = trajectory_metrics(stance_trajectory(robot, spin=spin), robot, PARAMS, CONTACTS)
     lever = np.hypot(0.3, 0.2)
     # local_world_aligned: the origin is still
     assert metrics["support_rmse_linear_position_left"] < 0.05
@@ -241,7 +244,7 @@ def test_position_level_ignores_the_predicted_joint_velocities(robot):
     do) reads ~0, the position level (the feet a robot would track) reads the known speed."""
     trajectory = line_trajectory(robot, distance=1.5, frames=100)  # 1.5 m in 10 s
     trajectory.joint_velocities = _still_feet_joint_velocities(robot, trajectory)
-    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
     assert metrics["contact_fraction_left"] == 1.0 and metrics["contact_fraction_right"] == 1.0
     assert metrics["support_rmse_linear_total"] < 1e-6
     assert metrics["support_rmse_angular_total"] < 1e-6
@@ -258,28 +261,28 @@ def test_levels_agree_when_the_base_keeps_the_foot_still(robot):
     swinging right sole's too; slide the whole robot and only the position level moves; zero
     file velocities and only the velocity level does."""
     still = stance_trajectory(robot, joint_velocities=True)
-    series = trajectory_time_series(still, robot, PARAMS)
+    series = trajectory_time_series(still, robot, PARAMS, CONTACTS)
     for side in ("left", "right"):
         np.testing.assert_allclose(
             series[f"{side}_rms_linear"], series[f"{side}_rms_linear_position"], atol=5e-3
         )
     assert series["right_rms_linear"].max() > 0.1  # the right sole swings
-    metrics = trajectory_metrics(still, robot, PARAMS)
+    metrics = trajectory_metrics(still, robot, PARAMS, CONTACTS)
     assert metrics["joint_velocity_gap_rms"] < 0.01  # finite-difference error only
 
     slid = trajectory_metrics(stance_trajectory(robot, slide=0.05, joint_velocities=True), robot,
-                              PARAMS)  # fmt: skip
+                              PARAMS, CONTACTS)  # fmt: skip
     assert slid["support_rmse_linear_left"] == pytest.approx(0.0, abs=1e-9)
     expected = FRAMES * 0.05 / SQRT3
     assert slid["support_rmse_linear_position_left"] == pytest.approx(expected, abs=2e-2)
 
     true_velocities = still.joint_velocities.copy()
     still.joint_velocities = np.zeros_like(true_velocities)
-    wrong = trajectory_time_series(still, robot, PARAMS)
+    wrong = trajectory_time_series(still, robot, PARAMS, CONTACTS)
     assert wrong[["left_rms_linear", "right_rms_linear"]].to_numpy().max() == 0.0
     np.testing.assert_array_equal(wrong["right_rms_linear_position"],
                                   series["right_rms_linear_position"])  # fmt: skip
-    gap = trajectory_metrics(still, robot, PARAMS)["joint_velocity_gap_rms"]
+    gap = trajectory_metrics(still, robot, PARAMS, CONTACTS)["joint_velocity_gap_rms"]
     assert gap == pytest.approx(np.sqrt(np.mean(true_velocities**2)), rel=0.02)
 
 
@@ -289,7 +292,7 @@ def test_still_foot_residual_is_second_order_in_the_frame_period(robot):
     residuals = []
     for rate in (50.0, 100.0):
         trajectory = stance_trajectory(robot, frames=int(2 * rate), rate=rate)
-        series = trajectory_time_series(trajectory, robot, PARAMS)
+        series = trajectory_time_series(trajectory, robot, PARAMS, CONTACTS)
         residuals.append(series["left_rms_linear_position"].max())
     assert residuals[1] < 0.3 * residuals[0]
 
@@ -297,19 +300,19 @@ def test_still_foot_residual_is_second_order_in_the_frame_period(robot):
 def test_file_joint_velocities_and_contacts_are_used(robot):
     trajectory = stance_trajectory(robot, joint_velocities=True)
     trajectory.contacts = np.ones((FRAMES, 2), dtype=bool)  # the file: both feet down
-    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
     assert metrics["joint_velocities_source"] == "file"
     assert metrics["contacts_source"] == "file"
-    series = trajectory_time_series(trajectory, robot, PARAMS)
+    series = trajectory_time_series(trajectory, robot, PARAMS, CONTACTS)
     right = metrics["support_rmse_linear_right"]
     assert right == pytest.approx(series["right_rms_linear"].sum(), rel=1e-12)
     assert right > 10.0  # the swinging sole counts as down
     # the velocity level is linear in the file's joint velocities
     trajectory.joint_velocities = 2.0 * trajectory.joint_velocities
-    doubled = trajectory_metrics(trajectory, robot, PARAMS)
+    doubled = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
     assert doubled["support_rmse_linear_right"] == pytest.approx(2.0 * right, rel=1e-9)
     trajectory.contacts = np.zeros((FRAMES, 2), dtype=bool)  # nothing in contact: nothing counts
-    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
     assert metrics["contacts_source"] == "file"
     assert metrics["support_rmse_linear_total"] == 0.0
     assert metrics["contact_foot_speed_mean"] is None
@@ -317,8 +320,8 @@ def test_file_joint_velocities_and_contacts_are_used(robot):
 
 def test_skating_ratio_threshold(robot):
     # 2.5 cm per frame at 20 fps is 0.5 m/s
-    below = trajectory_metrics(stance_trajectory(robot, slide=0.4), robot, PARAMS)
-    above = trajectory_metrics(stance_trajectory(robot, slide=0.6), robot, PARAMS)
+    below = trajectory_metrics(stance_trajectory(robot, slide=0.4), robot, PARAMS, CONTACTS)
+    above = trajectory_metrics(stance_trajectory(robot, slide=0.6), robot, PARAMS, CONTACTS)
     assert below["skating_ratio"] == 0.0
     assert above["skating_ratio"] == pytest.approx(1.0)  # the low left foot skates throughout
 
@@ -363,7 +366,7 @@ def test_manifold_velocities_of_an_uneven_clock(robot, rng):
 
 
 def test_drift_of_a_straight_line_is_zero(robot):
-    metrics = trajectory_metrics(line_trajectory(robot), robot, PARAMS)
+    metrics = trajectory_metrics(line_trajectory(robot), robot, PARAMS, CONTACTS)
     assert metrics["drift_x"] == pytest.approx(1.5)
     assert metrics["drift_y"] == pytest.approx(0.0, abs=1e-12)
     assert metrics["drift_yaw"] == pytest.approx(0.0, abs=1e-12)
@@ -378,7 +381,9 @@ def test_walking_takes_the_distance_on_steps(robot):
         contacts = np.ones((len(trajectory.time), 2), dtype=bool)
         for k in range(steps):  # each step: one foot up for 10 frames, then down again
             contacts[10 + 20 * k : 20 + 20 * k, k % 2] = False
-        return trajectory_metrics(dataclasses.replace(trajectory, contacts=contacts), robot, PARAMS)
+        return trajectory_metrics(
+            dataclasses.replace(trajectory, contacts=contacts), robot, PARAMS, CONTACTS
+        )
 
     assert stepping(1.5, 2)["touchdowns"] == 2 and stepping(1.5, 2)["walks"] is True
     assert stepping(1.5, 1)["walks"] is False
@@ -387,17 +392,17 @@ def test_walking_takes_the_distance_on_steps(robot):
 
 def test_drift_of_a_known_offset_and_turn(robot):
     trajectory = line_trajectory(robot, heading=2.8, lateral=-0.3, turn=4.0)  # past +-pi
-    metrics = trajectory_metrics(trajectory, robot, PARAMS)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
     assert metrics["drift_y"] == pytest.approx(-0.3)
     assert metrics["drift_yaw"] == pytest.approx(4.0)  # unwrapped
     assert metrics["drift_roll"] == pytest.approx(0.0, abs=1e-9)
-    series = trajectory_time_series(trajectory, robot, PARAMS)
+    series = trajectory_time_series(trajectory, robot, PARAMS, CONTACTS)
     np.testing.assert_allclose(series["base_y"], np.linspace(0, -0.3, len(series)), atol=1e-12)
     assert series["base_yaw"].is_monotonic_increasing
 
 
 def test_time_series_columns(robot):
-    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS)
+    series = trajectory_time_series(stance_trajectory(robot), robot, PARAMS, CONTACTS)
     assert len(series) == FRAMES and series["time"].iloc[0] == 0.0
     for column in ["base_x", "base_yaw", "left_foot_height", "right_sole_pitch", "left_contact"]:
         assert column in series
@@ -423,15 +428,15 @@ def test_aggregate_over_seeds():
 def test_metrics_for_file_and_collection(robot, tmp_path):
     single = tmp_path / "one.h5"
     write_trajectory(single, line_trajectory(robot))
-    metrics = metrics_for_file(single, robot, PARAMS)
+    metrics = metrics_for_file(single, robot, PARAMS, CONTACTS)
     json.dumps(metrics)  # serialisable
     assert metrics["drift_x"] == pytest.approx(1.5)
     collection = tmp_path / "many.h5"
     write_collection(collection, [("a", line_trajectory(robot)), ("b", stance_trajectory(robot))])
-    both = metrics_for_file(collection, robot, PARAMS)
+    both = metrics_for_file(collection, robot, PARAMS, CONTACTS)
     assert set(both) == {"a", "b"} and both["b"]["contact_fraction_left"] == 1.0
     with pytest.raises(PimannError, match="not found"):
-        metrics_for_file(tmp_path / "missing.h5", robot, PARAMS)
+        metrics_for_file(tmp_path / "missing.h5", robot, PARAMS, CONTACTS)
 
 
 def test_errors_inside_a_file_name_the_file_and_the_group(robot, tmp_path):
@@ -440,15 +445,15 @@ def test_errors_inside_a_file_name_the_file_and_the_group(robot, tmp_path):
     single = tmp_path / "one.h5"
     write_trajectory(single, bad)
     with pytest.raises(PimannError, match=rf"^{single} \(frame 5\): .*not strictly increasing"):
-        metrics_for_file(single, robot, PARAMS)
+        metrics_for_file(single, robot, PARAMS, CONTACTS)
     collection = tmp_path / "many.h5"
     write_collection(collection, [("good", line_trajectory(robot)), ("bad", bad)])
     with pytest.raises(PimannError, match=rf"^{collection} \(frame 5\): group 'bad': "):
-        metrics_for_file(collection, robot, PARAMS)
+        metrics_for_file(collection, robot, PARAMS, CONTACTS)
 
 
 def test_about_names_the_outer_file_and_keeps_the_frame():
-    from pimann.errors import about
+    from pimann.core.errors import about
 
     with pytest.raises(PimannError) as caught, about("run.h5", "simulate run x"):
         raise PimannError(None, "DCM/ZMP plan not solved", frame=3)
@@ -462,7 +467,7 @@ def test_bad_time_is_named(robot):
     trajectory = line_trajectory(robot)
     trajectory.time[5] = trajectory.time[4]
     with pytest.raises(PimannError, match=r"frame 5.*not strictly increasing"):
-        trajectory_metrics(trajectory, robot, PARAMS)
+        trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
 
 
 def test_configurations_match_robot_configuration(robot):

@@ -1,4 +1,5 @@
-"""Gait sustainment from a clip's mid-stride state (pimann.mid_stride) on a tiny real model."""
+"""Gait sustainment from a clip's mid-stride state (pimann.generate.mid_stride) on a tiny real
+model."""
 
 from __future__ import annotations
 
@@ -7,23 +8,23 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from builders import RATE, GaitModel, roll, synthetic_clip, synthetic_collection
 
-from pimann.features import build_dataset, write_dataset
-from pimann.generate import RolloutSpec, generate_batch
-from pimann.mann import MANN
-from pimann.mid_stride import (
+from pimann.core.params import ModelParams, MotionSegment, load_params
+from pimann.core.trajectory import write_collection
+from pimann.generate.generator import RolloutSpec, generate_batch
+from pimann.generate.mid_stride import (
     achieved,
     clip_start,
     leg_joint_agreement,
     network_ratio,
     sustainment,
 )
-from pimann.model_files import load_model, save_model
-from pimann.params import ModelParams, MotionSegment, load_params
-from pimann.standing import StandingPose
-from pimann.trajectory import write_collection
-from tests.test_features import RATE, synthetic_clip, synthetic_collection
-from tests.test_generate import GaitModel, roll
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
+from pimann.learn.mann import MANN
+from pimann.learn.model_files import load_model, save_model
+from pimann.learn.standing import StandingPose
 
 
 def test_clip_start_takes_the_middle_frame_and_its_motion():
@@ -101,7 +102,7 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
     velocities = np.linspace(-1.0, 1.0, len(pose.joints))
     (rollout,) = generate_batch(
         model, layout, stats, [RolloutSpec([MotionSegment(1.0, 0.5, 0.0, 0.0)], False)],
-        params.rollout, contact_params=params.evaluate, standing=pose,
+        params.rollout, contact_params=params.contacts, standing=pose,
         start_joint_velocities=velocities,
     )  # fmt: skip
     np.testing.assert_array_equal(rollout.trajectory.joint_positions[0], pose.joints)
@@ -115,7 +116,7 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
 
 
 def test_a_folder_without_models_gets_one_line(tmp_path, capsys):
-    from pimann.mid_stride import main
+    from pimann.generate.mid_stride import main
 
     assert main(["--models", str(tmp_path / "missing")]) == 2
     error = capsys.readouterr().err

@@ -6,9 +6,11 @@ import re
 
 import numpy as np
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 from scipy.spatial.transform import Rotation
 
+from pimann.core.robot import JOINT_NAMES, SEGMENTS, mirror_joint_name
+from pimann.core.trajectory import Trajectory
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mirror import (
     mirror_human,
@@ -17,8 +19,6 @@ from pimann.mocap.mirror import (
     mirror_segment_name,
     mirror_trajectory,
 )
-from pimann.robot import JOINT_NAMES, SEGMENTS, mirror_joint_name
-from pimann.trajectory import Trajectory
 
 M = np.diag([1.0, -1.0, 1.0])
 

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.paths import shared_dir
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.io import mocap_format, mocap_info, read_mocap
 from pimann.mocap.mvnx import mvnx_info, read_mvnx
-from pimann.paths import shared_dir
-from pimann.robot import SEGMENTS
 
 MVNX = shared_dir() / "data" / "xsens" / "mvnx" / "Meri-020.mvnx"
 pytestmark = pytest.mark.skipif(not MVNX.is_file(), reason="shared MVNX sample not present")

@@ -5,8 +5,8 @@ from __future__ import annotations
 import pytest
 import yaml
 
-from pimann.errors import PimannError
-from pimann.params import DEFAULT_PARAMS, load_params
+from pimann.core.errors import PimannError
+from pimann.core.params import DEFAULT_PARAMS, load_params
 
 
 def _write(tmp_path, raw: dict):
@@ -80,21 +80,22 @@ def _set(raw: dict, dotted: str, value) -> None:
         (
             "rollout.scenario_names.1",
             "backwards",
-            r"rollout.scenario_names\[1\]: unknown 'backwards'; known: backward, forward",
+            r"rollout.scenario_names.1: unknown 'backwards'; known: backward, forward",
         ),
-        ("simulate.runs.0.model", "w7", r"simulate.runs\[0\].model: unknown 'w7'; known: w0, w1"),
-        ("simulate.runs.0.seed", 9, r"simulate.runs\[0\].seed: unknown 9"),
-        ("figures.pi_weight", 7, r"figures.pi_weight: unknown 7.0; known: 0.0, 1.0"),
-        ("figures.box_weights.1", 3, r"figures.box_weights\[1\]: unknown 3.0"),
-        ("evaluate.contact_off_height", 0.01, r"contact_off_height must be >= evaluate.contact_on"),
+        ("simulate.runs.0.model", "w7", r"simulate.runs.0.model: unknown 'w7'; known: w0, w1"),
+        ("simulate.runs.0.seed", 9, r"simulate.runs.0.seed: unknown 9"),
+        ("evaluate.pi_weight", 7, r"evaluate.pi_weight: unknown 7.0; known: 0.0, 1.0"),
+        ("figures.box_weights.1", 3, r"figures.box_weights.1: unknown 3.0"),
+        ("contacts.off_height", 0.01, r"contacts.off_height must be >= contacts.on_height"),
+        ("contacts.switch_time", -0.1, r"contacts.switch_time must be >= 0, not -0.1"),
         ("train.seeds", [0, 0], r"train.seeds must be a non-empty list without repeats"),
         ("simulate.mpc.friction", 0.0, r"simulate.mpc.friction must be > 0, not 0.0"),
         ("simulate.mpc.box_y", [0.01, 0.05], r"simulate.mpc.box_y must be \[low <= 0, high >= 0\]"),
         ("simulate.mpc.com_z_min", 0.8, r"com_z_min must not exceed simulate.mpc.com_z_max"),
         ("simulate.mpc.com_weight", [2.0, 2.0], r"simulate.mpc.com_weight must have 3 entries"),
         ("simulate.mpc.com_weight.2", -1.0, r"simulate.mpc.com_weight.2 must be >= 0, not -1.0"),
-        ("simulate.runs.0.controller", "mpc", r"simulate.runs\[0\].controller must be one of"),
-        ("simulate.pushes.rollouts.0.model", "w7", r"simulate.pushes.rollouts\[0\].model: unknown"),
+        ("simulate.runs.0.controller", "mpc", r"simulate.runs.0.controller must be one of"),
+        ("simulate.pushes.rollouts.0.model", "w7", r"simulate.pushes.rollouts.0.model: unknown"),
         ("simulate.pushes.tolerance", 0.0, r"simulate.pushes.tolerance must be > 0"),
     ],
 )
@@ -141,3 +142,30 @@ def test_a_run_without_a_controller_is_offline(tmp_path, raw):
     params = load_params(_write(tmp_path, raw))
     assert params.simulate.runs[0].controller == "offline"
     assert {run.controller for run in params.simulate.runs} == {"offline", "online"}
+
+
+def test_a_value_the_active_profile_hides_is_still_checked(tmp_path, raw):
+    raw["profile"] = "quick"
+    raw["profiles"]["quick"]["train.epochs"] = 70
+    raw["train"]["epochs"] = -3  # the base: quick overrides it, paper runs it
+    with pytest.raises(PimannError, match=r"train.epochs must be >= 1, not -3$"):
+        load_params(_write(tmp_path, raw))
+
+
+def test_a_bad_profile_value_names_the_profile(tmp_path, raw):
+    raw["profile"] = "paper"
+    raw["profiles"]["quick"]["train.epochs"] = 0  # not the active profile
+    with pytest.raises(PimannError, match=r"train.epochs must be >= 1, not 0 \(profile quick\)"):
+        load_params(_write(tmp_path, raw))
+    raw["profiles"]["quick"]["train.epochs"] = 70
+    raw["profiles"]["quick"]["evaluate.pi_weight"] = 3  # a cross-reference, merged
+    with pytest.raises(PimannError, match=r"evaluate.pi_weight: unknown 3.*\(profile quick\)"):
+        load_params(_write(tmp_path, raw))
+
+
+def test_the_profile_can_be_chosen_by_the_caller(tmp_path, raw):
+    raw["profile"] = "quick"
+    path = _write(tmp_path, raw)
+    paper = load_params(path, profile="paper")
+    assert paper.profile == "paper" and paper.train.epochs == raw["train"]["epochs"]
+    assert load_params(path).train.epochs == raw["profiles"]["quick"]["train.epochs"]

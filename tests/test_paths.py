@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from pimann.paths import PACKAGE_CHECKOUT, SHARED_ENV, project_root, shared_dir
+from pimann.core.paths import PACKAGE_CHECKOUT, SHARED_ENV, project_root, shared_dir
 
 
 def test_project_root_is_found_from_the_working_folder(tmp_path):
@@ -25,7 +25,7 @@ def test_shared_dir_follows_the_setting(monkeypatch, tmp_path):
 
 
 def test_repo_relative_paths(tmp_path):
-    from pimann.paths import REPO_ROOT, repo_relative
+    from pimann.core.paths import REPO_ROOT, repo_relative
 
     assert repo_relative(REPO_ROOT / "models" / "w10" / "0") == "models/w10/0"
     assert repo_relative(tmp_path / "x.h5") == str((tmp_path / "x.h5").resolve())

@@ -7,8 +7,8 @@ import pinocchio as pin
 import pytest
 import torch
 
-from pimann.physics_loss import PhysicsInformedLoss
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE
+from pimann.learn.physics_loss import PhysicsInformedLoss
 
 
 @pytest.fixture(scope="module")

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from pimann.errors import PimannError
-from pimann.picture_files import (
+from pimann.core.errors import PimannError
+from pimann.render.picture_files import (
     FILL_WHITE,
     SEPARATOR,
     SEPARATOR_GREY,

@@ -8,14 +8,14 @@ import logging
 import re
 
 import pytest
-from test_features import synthetic_collection
-from test_train import SMALL_MODEL
+from builders import SMALL_MODEL, synthetic_collection
 
-from pimann.features import build_dataset, write_dataset
-from pimann.parallel import pool_map
-from pimann.params import load_params
-from pimann.progress import MAX_SECONDS, Progress, track
-from pimann.train import train_models
+from pimann.core.parallel import pool_map
+from pimann.core.params import load_params
+from pimann.core.progress import MAX_SECONDS, Progress, track
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
+from pimann.learn.train import train_models
 
 LOGGER = "pimann.test_progress"
 
@@ -104,7 +104,7 @@ def test_training_logs_epochs_only_at_debug(tmp_path, tiny, caplog, level):
     params, path = tiny
     caplog.set_level(level, logger="pimann")
     train_models(path, tmp_path / "baseline", 0.0, [0, 1], params, "cpu")
-    lines = [r.getMessage() for r in caplog.records if r.name == "pimann.train"]
+    lines = [r.getMessage() for r in caplog.records if r.name == "pimann.learn.train"]
     epochs = [line for line in lines if " epoch " in line]
     if level == logging.INFO:
         assert len(lines) <= 2 and not epochs, lines

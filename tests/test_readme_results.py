@@ -6,9 +6,9 @@ import json
 
 import pytest
 
-from pimann.errors import PimannError
-from pimann.paths import PACKAGE_CHECKOUT
-from pimann.readme_results import (
+from pimann.core.errors import PimannError
+from pimann.core.paths import PACKAGE_CHECKOUT
+from pimann.report.readme_results import (
     RESULTS_BEGIN,
     RESULTS_END,
     replace_block,

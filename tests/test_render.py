@@ -2,30 +2,37 @@
 
 from __future__ import annotations
 
+import functools
+
 import imageio.v3 as iio
 import numpy as np
 import pytest
+from builders import CONTACT_PARAMS
 from matplotlib.colors import to_rgb
 
-from pimann.errors import PimannError
-from pimann.mocap.human_motion import HumanMotion
-from pimann.render import (
-    LEFT_COLOUR,
-    RIGHT_COLOUR,
-    human_skeleton,
-    match_frames,
-    render_file,
-    render_trajectory,
-    robot_skeleton,
-)
-from pimann.robot import (
+from pimann.core.errors import PimannError
+from pimann.core.robot import (
     JOINT_NAMES,
     SEGMENTS,
     STANDING_BASE_HEIGHT,
     STANDING_BASE_QUATERNION_XYZW,
     STANDING_JOINTS,
 )
-from pimann.trajectory import Trajectory, write_trajectory
+from pimann.core.trajectory import Trajectory, write_trajectory
+from pimann.mocap.human_motion import HumanMotion
+from pimann.render.beside_mocap import render_file as _render_file
+from pimann.render.trajectory import (
+    LEFT_COLOUR,
+    RIGHT_COLOUR,
+    human_skeleton,
+    match_frames,
+    robot_skeleton,
+)
+from pimann.render.trajectory import render_trajectory as _render_trajectory
+
+# the repository's contact rule, for the trajectories without contact flags
+render_file = functools.partial(_render_file, contacts=CONTACT_PARAMS)
+render_trajectory = functools.partial(_render_trajectory, contacts=CONTACT_PARAMS)
 
 W, H = 320, 240
 
@@ -95,7 +102,7 @@ def test_bad_extension_names_file(tmp_path, name):
 
 def test_robot_skeleton_matches_pinocchio(robot):
     traj = standing(3, knee=-0.5)
-    skeleton = robot_skeleton(traj, np.array([0, 2]), robot)
+    skeleton = robot_skeleton(traj, np.array([0, 2]), robot, CONTACT_PARAMS)
     q = robot.configuration(
         traj.base_position[2], traj.base_quaternion_xyzw[2], traj.joint_positions[2]
     )
@@ -118,7 +125,7 @@ def side_of_bones(skeleton) -> dict[str, np.ndarray]:
 
 
 def test_left_is_blue_right_is_red(robot):
-    robot_sides = side_of_bones(robot_skeleton(standing(1), np.array([0]), robot))
+    robot_sides = side_of_bones(robot_skeleton(standing(1), np.array([0]), robot, CONTACT_PARAMS))
     human_sides = side_of_bones(human_skeleton(tpose_human(1), np.array([0])))
     for sides in (robot_sides, human_sides):
         assert len(sides[LEFT_COLOUR]) >= 6 and np.all(sides[LEFT_COLOUR] > 0.03)
@@ -126,8 +133,8 @@ def test_left_is_blue_right_is_red(robot):
 
 
 def test_contacts_from_height_when_not_given(robot):
-    on_floor = robot_skeleton(standing(1), np.array([0]), robot)
-    lifted = robot_skeleton(standing(1, lift=0.1), np.array([0]), robot)
+    on_floor = robot_skeleton(standing(1), np.array([0]), robot, CONTACT_PARAMS)
+    lifted = robot_skeleton(standing(1, lift=0.1), np.array([0]), robot, CONTACT_PARAMS)
     assert on_floor.contacts.tolist() == [[True, True]]
     assert lifted.contacts.tolist() == [[False, False]]
     given = standing(2)

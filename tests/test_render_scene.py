@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from matplotlib.colors import to_rgb
 
-from pimann.render_scene import (
+from pimann.render.scene import (
     AZIMUTH_DEG,
     ELEVATION_DEG,
     LEFT_COLOUR,

@@ -1,4 +1,4 @@
-"""The report page (pimann.report) from a crafted results/ folder: self-contained (every
+"""The report page (pimann.report.page) from a crafted results/ folder: self-contained (every
 image and video a data: URI, no http(s) address, no script), and, where a headless Chromium
 is installed, every image and video loads in it."""
 
@@ -14,12 +14,10 @@ from html.parser import HTMLParser
 import imageio.v2 as imageio
 import numpy as np
 import pytest
-from test_command_following import crafted_rows
-from test_figures import crafted_results
-from test_key_metrics import SIM_SUMMARY
+from builders import SIM_SUMMARY, crafted_results, crafted_rows
 
-from pimann.params import load_params
-from pimann.report import (
+from pimann.core.params import load_params
+from pimann.report.page import (
     CLAIM_MARKS,
     HEADLINE_FIGURES,
     build_report,

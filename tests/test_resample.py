@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample, slerp_quaternions, uniform_grid
-from pimann.robot import SEGMENTS
 
 N_SEG = len(SEGMENTS)
 

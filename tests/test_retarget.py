@@ -8,15 +8,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
+from pimann.core.params import load_params
+from pimann.core.paths import mocap_dir
+from pimann.core.robot import SEGMENTS, STANDING_JOINTS
 from pimann.mocap.clips import read_take, take_of
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample
-from pimann.params import load_params
-from pimann.paths import mocap_dir
 from pimann.retarget import retarget_motion
 from pimann.retarget.ik import RetargetIK
 from pimann.retarget.quality import frame_measures, summarize
-from pimann.robot import SEGMENTS, STANDING_JOINTS
 
 REAL_CLIP = "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"
 
@@ -28,15 +28,13 @@ def params():
 
 def test_ik_recovers_joints_of_a_forward_kinematics_pose(robot, rng, params):
     # the inequalities (leg spread, feet spacing, shoulder roll) are off: a random pose may
-    # break them; a tiny posture cost keeps the optimum at the exact pose
+    # break them; a tiny posture cost keeps the optimum at the exact pose. The negative
+    # bounds are no values params.yaml allows: set past the params' validation
     ik_params = dataclasses.replace(
-        params.retarget,
-        posture_cost=1e-8,
-        min_leg_roll_spread=-10.0,
-        min_shoulder_roll=-10.0,
-        min_foot_spacing=-10.0,
-        gain_time_step=1.0 / params.retarget.segment_gain,
+        params.retarget, posture_cost=1e-8, gain_time_step=1.0 / params.retarget.segment_gain
     )
+    for name in ("min_leg_roll_spread", "min_shoulder_roll", "min_foot_spacing"):
+        object.__setattr__(ik_params, name, -10.0)
     margin = 0.05
     joints = np.clip(
         STANDING_JOINTS + rng.uniform(-0.3, 0.3, size=len(STANDING_JOINTS)),
@@ -135,7 +133,11 @@ def test_a_flight_phase_keeps_a_foot_down_and_every_sole_above_the_floor(robot, 
     # the motion-matching take jogs through a 0.15 s flight (no foot down) at 72.6 s: the
     # robot walks it with the foot that left last still planted (it once sank 28 cm and
     # put a sole 14 cm under the floor)
-    from pimann.contacts import foot_kinematics, lowest_corner_heights, trajectory_configurations
+    from pimann.core.contacts import (
+        foot_kinematics,
+        lowest_corner_heights,
+        trajectory_configurations,
+    )
     from pimann.mocap.clips import slice_motion
 
     path = mocap_dir() / "motionmatching-locomotion/locomotion.bvh"

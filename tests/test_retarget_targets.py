@@ -9,7 +9,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pimann.mocap.human_motion import HumanMotion
-from pimann.params import load_params
+from pimann.core.params import load_params
 from pimann.retarget.targets import (
     ARM_MARGIN,
     abduct_arms,
@@ -19,7 +19,7 @@ from pimann.retarget.targets import (
     segment_targets,
     spread_legs,
 )
-from pimann.robot import SEGMENTS
+from pimann.core.robot import SEGMENTS
 
 T = 7
 

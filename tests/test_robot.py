@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
-from pimann.errors import PimannError
-from pimann.robot import JOINT_NAMES, SEGMENTS, STANDING_JOINTS, load_robot
+from pimann.core.errors import PimannError
+from pimann.core.robot import JOINT_NAMES, SEGMENTS, STANDING_JOINTS, load_robot
 
 SPEC_ORDER = (
     "l_hip_pitch l_hip_roll l_hip_yaw l_knee l_ankle_pitch l_ankle_roll "

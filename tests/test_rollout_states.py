@@ -7,20 +7,18 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
-from test_train import (  # noqa: F401 (fixtures)
+from builders import (
     SMALL_MODEL,
-    dataset_path,
-    params,
     trains_differently_and_deterministically,
 )
 
-from pimann.epochs import epoch_seed
-from pimann.features import read_dataset
-from pimann.held_out_loss import HeldOutLoss, batched_loss
-from pimann.mann import MANN
-from pimann.rollout_states import OwnRollouts, RolloutStates, rollout_pieces
-from pimann.train import train_models
-from pimann.training_loss import TrainingLoss
+from pimann.learn.dataset import read_dataset
+from pimann.learn.epochs import epoch_seed
+from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
+from pimann.learn.mann import MANN
+from pimann.learn.rollout_states import OwnRollouts, RolloutStates, rollout_pieces
+from pimann.learn.train import train_models
+from pimann.learn.training_loss import TrainingLoss
 
 
 def test_pieces_follow_clips_gaps_and_length():
@@ -136,7 +134,7 @@ def test_the_test_loss_weighs_own_rollouts_as_training(tmp_path, params, dataset
     model's own-rollout inputs' on the test clips."""
     import csv
 
-    from pimann.model_files import load_model
+    from pimann.learn.model_files import load_model
 
     share = 0.5
     train = dataclasses.replace(

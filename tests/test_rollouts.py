@@ -1,5 +1,6 @@
-"""The rollouts' layout (pimann.rollout_layout) and runner (pimann.rollouts): paths, the
-table's model names, and that both sit apart from the evaluation (the layout also apart from
+"""The rollouts' layout (pimann.generate.rollout_layout) and runner (pimann.generate.rollouts):
+paths, the table's model names, and that both sit apart from the evaluation (the layout also apart
+from
 the generator)."""
 
 from __future__ import annotations
@@ -13,21 +14,20 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from test_data_reference import walking_clip
+from builders import benchmark_collection, tiny_models, walking_clip
 
-from pimann.benchmark_clips import benchmark_clips, benchmark_scripts
-from pimann.clip_commands import clip_commands
-from pimann.errors import PimannError
-from pimann.params import MotionSegment, StandSegment, load_params
-from pimann.paths import REPO_ROOT
-from pimann.rollout_layout import (
+from pimann.core.errors import PimannError
+from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
+from pimann.generate.clip_commands import clip_commands
+from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,
     TRAINING,
     RolloutKey,
     clip_scenario,
     find_rollouts,
-    model_seeds,
     parse_rollout_path,
     pi_models,
     read_script,
@@ -38,10 +38,15 @@ from pimann.rollout_layout import (
     select_rows,
     weight_label,
 )
-from pimann.rollouts import models_record, rollout_scripts
-from pimann.trajectory import write_collection
+from pimann.generate.rollouts import models_record, rollout_scripts
+from pimann.learn.model_files import model_seeds
 
-EVALUATION = ("pimann.evaluate", "pimann.claims", "pimann.claim_rules", "pimann.data_reference")
+EVALUATION = (
+    "pimann.evaluate.evaluation",
+    "pimann.evaluate.claims",
+    "pimann.evaluate.claim_rules",
+    "pimann.evaluate.data_reference",
+)
 
 
 def test_rollout_paths_round_trip(tmp_path):
@@ -66,22 +71,6 @@ def test_table_models_and_rows():
     assert pi_models(frame) == {1.0: "w1", 10.0: "w10"}
     assert weight_label(10.0) == "10" and weight_label(0.5) == "0.5"
     assert list(select_rows(frame, "forward", False, model="w10").index) == [1]
-
-
-def benchmark_collection(path):
-    """Sources a, b, c, d: features.split_seed 0 holds out c (a short walk and its 'mirror';
-    one of the three forward sources), leaving a and d (forward) and b (standing) to train on."""
-    write_collection(
-        path,
-        [
-            ("a", walking_clip(0.5, 300, "a")),
-            ("b", walking_clip(0.0, 100, "b")),
-            ("c", walking_clip(0.4, 100, "c")),
-            ("c mirror", walking_clip(0.4, 100, "c")),
-            ("d", walking_clip(0.45, 100, "d")),
-        ],
-    )
-    return path
 
 
 def test_benchmark_scripts_of_the_test_clips_and_a_few_training_clips(tmp_path):
@@ -136,17 +125,20 @@ def test_scripts_round_trip_through_json():
 
 GENERATION = (
     "torch",
-    "pimann.generate",
-    "pimann.batch_generate",
-    "pimann.train",
-    "pimann.model_files",
-    "pimann.mann",
+    "pimann.generate.generator",
+    "pimann.generate.batch_generate",
+    "pimann.learn.train",
+    "pimann.learn.model_files",
+    "pimann.learn.mann",
 )
 
 
 @pytest.mark.parametrize(
     "module, forbidden",
-    [("pimann.rollouts", EVALUATION), ("pimann.rollout_layout", EVALUATION + GENERATION)],
+    [
+        ("pimann.generate.rollouts", EVALUATION),
+        ("pimann.generate.rollout_layout", EVALUATION + GENERATION),
+    ],
 )
 def test_the_layout_imports_neither_generation_nor_evaluation(module, forbidden):
     code = f"import sys, {module}; print(sorted(m for m in sys.modules if m in {forbidden!r}))"
@@ -170,17 +162,16 @@ def test_rollout_users_import_the_layout_not_the_evaluation():
     ]
     for path in users:
         assert not _imports(path) & set(EVALUATION), path
-    assert "pimann.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
-    assert "pimann.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
+    assert "pimann.generate.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
+    assert "pimann.generate.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
 
 
 def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
     """One batch per seed (scripts x steering): each file as `pimann generate` writes it."""
-    from test_evaluate import _tiny_models
 
-    from pimann.generate import generate_file
-    from pimann.rollouts import run_rollouts
-    from pimann.trajectory import read_trajectory
+    from pimann.core.trajectory import read_trajectory
+    from pimann.generate.generator import generate_file
+    from pimann.generate.rollouts import run_rollouts
 
     params = load_params()
     params = dataclasses.replace(
@@ -200,7 +191,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
             benchmark_train_clips=0,
         ),
     )
-    _tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
+    tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
     written = run_rollouts(tmp_path / "models" / "w10", tmp_path / "w10", params, workers=1)
     assert len(written) == 2 * 2 * 2 and (tmp_path / "w10" / "models.json").is_file()
     for key in (RolloutKey("w10", 1, "stop", True), RolloutKey("w10", 0, "short", False)):

@@ -19,13 +19,14 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pimann.features import build_dataset, write_dataset
-from pimann.params import load_params
-from pimann.paths import shared_dir
+from pimann.core.params import load_params
+from pimann.core.paths import shared_dir
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).parent))  # test_features' synthetic clips
-from test_features import synthetic_collection  # noqa: E402
+from builders import synthetic_collection  # noqa: E402
 
 # what a clone of the pipeline needs to run the training stages (no results, no lock file)
 PROJECT = ["dvc.yaml", "params.yaml", ".dvc/config", ".dvcignore", ".gitignore"]

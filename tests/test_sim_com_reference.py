@@ -8,15 +8,15 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.errors import PimannError
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE
-from pimann.rotations import rot_z
+from pimann.core.errors import PimannError
+from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE
+from pimann.core.rotations import rot_z
+from pimann.core.trajectory import Trajectory
 from pimann.sim.com_reference import com_reference
 from pimann.sim.dcm import knot_times, lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import extract_footsteps, relative
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import stepping_plan, stepping_trajectory
-from pimann.trajectory import Trajectory
 
 WEIGHT = 1.0  # the tests' own CoM weight (params.yaml's today), not read from params.yaml
 

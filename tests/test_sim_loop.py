@@ -8,7 +8,7 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback

@@ -6,10 +6,10 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
-from pimann.params import load_params
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, load_robot
+from pimann.core.params import load_params
+from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, load_robot
 from pimann.sim.model import build_sim_model
 from pimann.sim.wbc import SOLE_HEIGHT, standing_pose
 

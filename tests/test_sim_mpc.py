@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from pimann.errors import PimannError
-from pimann.params import MpcParams, SimulateRun, load_params
-from pimann.rotations import rot_z
+from pimann.core.errors import PimannError
+from pimann.core.params import MpcParams, SimulateRun, load_params
+from pimann.core.rotations import rot_z
 from pimann.sim.centroidal_mpc import (
     GRAVITY,
     CentroidalMPC,
@@ -180,11 +180,11 @@ def test_online_walk_in_mujoco(sim_robot, sim_params):
 
 def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot, sim_params):
     """An online run whose MPC cannot be solved is recorded; the offline run beside it walks."""
-    from pimann.rollout_layout import RolloutKey, rollout_path
+    from pimann.core.trajectory import write_trajectory
+    from pimann.generate.rollout_layout import RolloutKey, rollout_path
     from pimann.sim.runs import simulate_runs
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
-    from pimann.trajectory import write_trajectory
 
     q0 = standing_pose(sim_robot, sim_params)
     plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
@@ -295,9 +295,9 @@ def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params)
 
 def test_cli_simulates_with_the_online_controller(tmp_path, capsys, sim_robot, sim_params):
     from pimann.cli import main
+    from pimann.core.trajectory import write_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
-    from pimann.trajectory import write_trajectory
 
     q0 = standing_pose(sim_robot, sim_params)
     plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)

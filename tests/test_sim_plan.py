@@ -9,9 +9,9 @@ import pinocchio as pin
 import pytest
 from scipy.spatial import ConvexHull
 
-from pimann.errors import PimannError
-from pimann.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
-from pimann.rotations import rot_z
+from pimann.core.errors import PimannError
+from pimann.core.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
+from pimann.core.rotations import rot_z
 from pimann.sim.dcm import lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import clean_contacts, extract_footsteps, relative
 from pimann.sim.synthetic import stepping_plan, stepping_trajectory

@@ -13,8 +13,9 @@ import pytest
 
 import pimann.sim  # noqa: F401 -- headless GL backend before mujoco loads
 from pimann.cli import main
-from pimann.figures import _read_sim
-from pimann.robot import JOINT_NAMES
+from pimann.core.robot import JOINT_NAMES
+from pimann.core.trajectory import read_trajectory, write_trajectory
+from pimann.report.figures import _read_sim
 from pimann.sim.dcm import plan_dcm
 from pimann.sim.results import (
     CONTACT_FORCE_N,
@@ -28,7 +29,6 @@ from pimann.sim.run import simulate_plan
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.video import render_simulation
 from pimann.sim.wbc import standing_pose
-from pimann.trajectory import read_trajectory, write_trajectory
 
 RECTANGLE = np.array([[0.0, 0.0], [0.2, 0.0], [0.2, 0.1], [0.0, 0.1]])
 
@@ -192,8 +192,8 @@ def test_render_produces_a_file(walk, sim_params, tmp_path, use_mujoco):
 
 
 def test_a_failed_run_is_recorded_and_the_stage_finishes(tmp_path, sim_robot, sim_params):
-    from pimann.params import SimulateRun, load_params
-    from pimann.rollout_layout import RolloutKey, rollout_path
+    from pimann.core.params import SimulateRun, load_params
+    from pimann.generate.rollout_layout import RolloutKey, rollout_path
     from pimann.sim.runs import simulate_runs
 
     q0 = standing_pose(sim_robot, sim_params)

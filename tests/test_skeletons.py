@@ -10,13 +10,13 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from pimann.cli import main
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.params import SkeletonParams, load_params
+from pimann.core.paths import mocap_dir
+from pimann.core.robot import SEGMENTS
+from pimann.core.trajectory import read_trajectory
 from pimann.mocap.bvh import bvh_landmarks, parse_bvh, read_bvh
 from pimann.mocap.skeletons import calibrate_segments, recognise_skeleton
-from pimann.params import SkeletonParams, load_params
-from pimann.paths import mocap_dir
-from pimann.robot import SEGMENTS
-from pimann.trajectory import read_trajectory
 
 BANDAI = (
     "bandai-namco/dataset/Bandai-Namco-Research-Motiondataset-1/data/dataset-1_walk_normal_001.bvh"

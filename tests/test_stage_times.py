@@ -1,4 +1,4 @@
-"""The study's time budget (pimann.stage_times): a stage run by DVC records its wall time, the
+"""The study's time budget (pimann.core.stage_times): a stage run by DVC records its wall time, the
 report gathers the records, sums them and shows them; dvc.yaml declares every record."""
 
 from __future__ import annotations
@@ -10,12 +10,11 @@ from datetime import datetime
 import pytest
 import yaml
 
-from pimann.errors import PimannError
-from pimann.params import load_params
-from pimann.paths import REPO_ROOT
-from pimann.report import build_report
-from pimann.stage import stage_entry
-from pimann.stage_times import (
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.stage import stage_entry
+from pimann.core.stage_times import (
     GATHERING_STAGE,
     STAGE_ENV,
     SUMMARY_FILE,
@@ -25,6 +24,7 @@ from pimann.stage_times import (
     write_record,
     write_summary,
 )
+from pimann.report.page import build_report
 
 
 def _napping(argv: list[str] | None) -> None:

@@ -1,17 +1,17 @@
-"""Where in a stance the feet slide (pimann.stance_phases): labels worked out by hand, shares
-of known sums, and the columns pimann.metrics and pimann.data_reference report."""
+"""Where in a stance the feet slide (pimann.evaluate.sliding): labels worked out by hand,
+shares
+of known sums, and the columns pimann.evaluate.metrics and pimann.evaluate.data_reference report."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from conftest import EVALUATE_PARAMS
-from test_data_reference import walking_clip
+from builders import CONTACT_PARAMS, EVALUATE_PARAMS, walking_clip
 
-from pimann.data_reference import clip_reference
-from pimann.metrics import trajectory_metrics
-from pimann.robot import load_robot
-from pimann.stance_phases import PHASES, phase_shares, stance_phases
+from pimann.core.robot import load_robot
+from pimann.evaluate.data_reference import clip_reference
+from pimann.evaluate.metrics import trajectory_metrics
+from pimann.evaluate.sliding import PHASES, phase_shares, stance_phases
 
 # one foot: a stance under way at the start (frames 0-2), one seen whole (5-11), one still on
 # at the end (13-14); edge 2: two frames each side
@@ -67,8 +67,8 @@ def test_metrics_and_data_reference_report_the_shares():
     data's reference alike. A glide with still joints moves no foot at the velocity level: it
     has no share to split."""
     clip = walking_clip(0.5, 200, "a")
-    metrics = trajectory_metrics(clip, load_robot("retarget"), EVALUATE_PARAMS)
-    reference = clip_reference(clip, EVALUATE_PARAMS)
+    metrics = trajectory_metrics(clip, load_robot("retarget"), EVALUATE_PARAMS, CONTACT_PARAMS)
+    reference = clip_reference(clip, EVALUATE_PARAMS, CONTACT_PARAMS)
     for row in (metrics, reference):
         assert row["support_rmse_linear_position_mid_share"] == pytest.approx(1.0)
         assert row["support_rmse_linear_position_liftoff_share"] == 0.0
@@ -86,7 +86,7 @@ def test_a_foot_dragged_before_lift_off_shows_in_the_metrics():
     start = clip.base_position[0].copy()
     moved = np.maximum(clip.time - clip.time[140], 0.0)[:, None]
     clip.base_position[:] = start + moved * (clip.base_position[1] - start) / clip.time[1]
-    metrics = trajectory_metrics(clip, robot, EVALUATE_PARAMS)
+    metrics = trajectory_metrics(clip, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert metrics["support_rmse_linear_position_liftoff_share"] == pytest.approx(5 / 70, rel=0.05)
     assert metrics["support_rmse_linear_position_touchdown_share"] == 0.0
     assert metrics["contact_liftoff_frames_share"] == pytest.approx(5 / 350)

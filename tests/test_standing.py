@@ -1,4 +1,5 @@
-"""The standing pose of generation (pimann.standing): the medoid of the data's standing frames."""
+"""The standing pose of generation (pimann.learn.standing): the medoid of the data's standing
+frames."""
 
 from __future__ import annotations
 
@@ -6,9 +7,9 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.robot import STANDING_JOINTS
-from pimann.standing import MIN_STANDING_FRAMES, StandingPose, data_standing
-from pimann.trajectory import Trajectory
+from pimann.core.robot import STANDING_JOINTS
+from pimann.core.trajectory import Trajectory
+from pimann.learn.standing import MIN_STANDING_FRAMES, StandingPose, data_standing
 
 RATE = 50.0
 

@@ -6,16 +6,8 @@ import numpy as np
 import pinocchio as pin
 import pytest
 
-from pimann.rotations import yaw_of
-from pimann.steering import (
-    goal_from_command,
-    hat,
-    reached_goal,
-    rotation_rpy,
-    skew_part,
-    steer,
-    vee,
-)
+from pimann.core.rotations import hat, rotation_rpy, skew_part, vee, yaw_of
+from pimann.generate.steering import goal_from_command, reached_goal, steer
 
 K0, K1 = 0.2, 2.0
 

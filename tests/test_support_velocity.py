@@ -1,4 +1,4 @@
-"""The velocity level's sole twists (pimann.support_velocity) against placements alone: the
+"""The velocity level's sole twists (pimann.evaluate.sliding) against placements alone: the
 support sole still, the other sole moving as the joints carry it relative to the support."""
 
 from __future__ import annotations
@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 import pytest
-from conftest import random_configuration
+from builders import random_configuration
 
-from pimann.contacts import FEET
-from pimann.support_velocity import support_foot_velocities
+from pimann.core.contacts import FEET
+from pimann.evaluate.sliding import support_foot_velocities
 
 
 def _moved(robot, q, joint_velocities, step):

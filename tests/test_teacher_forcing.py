@@ -1,4 +1,5 @@
-"""Teacher-forced response per motion class (pimann.teacher_forcing) on a tiny real pipeline."""
+"""Teacher-forced response per motion class (pimann.learn.teacher_forcing) on a tiny real
+pipeline."""
 
 from __future__ import annotations
 
@@ -7,14 +8,15 @@ import dataclasses
 import numpy as np
 import pytest
 import torch
+from builders import synthetic_collection
 
-from pimann.features import build_dataset, write_dataset
-from pimann.mann import MANN
-from pimann.model_files import save_model
-from pimann.params import ModelParams, load_params
-from pimann.teacher_forcing import _slope, class_response
-from pimann.trajectory import write_collection
-from tests.test_features import synthetic_collection
+from pimann.core.params import ModelParams, load_params
+from pimann.core.trajectory import write_collection
+from pimann.learn.dataset import write_dataset
+from pimann.learn.features import build_dataset
+from pimann.learn.mann import MANN
+from pimann.learn.model_files import save_model
+from pimann.learn.teacher_forcing import _slope, class_response
 
 
 def test_slope_of_a_scaled_copy_and_of_a_constant():
@@ -52,7 +54,7 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
 
 
 def test_models_folder_or_one_training_output_and_a_named_error(tmp_path, capsys):
-    from pimann.teacher_forcing import main, model_folders
+    from pimann.learn.teacher_forcing import main, model_folders
 
     (tmp_path / "w10" / "0").mkdir(parents=True)
     (tmp_path / "w10" / "0" / "meta.json").write_text("{}")
@@ -70,9 +72,9 @@ def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(rob
     flight, or without contact flags."""
     import pinocchio as pin
 
-    from pimann.robot import LEFT_SOLE, RIGHT_SOLE
-    from pimann.teacher_forcing import contact_leg_velocity
-    from pimann.training_loss import TrainingLoss
+    from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE
+    from pimann.learn.teacher_forcing import contact_leg_velocity
+    from pimann.learn.training_loss import TrainingLoss
 
     params = load_params()
     dataset = build_dataset(synthetic_collection(n_sources=2, frames=120), params.features, "full")

@@ -6,8 +6,8 @@ import os
 
 import pytest
 
-from pimann.errors import PimannError
-from pimann.parallel import (
+from pimann.core.errors import PimannError
+from pimann.core.parallel import (
     THREADS_ENV,
     busy_cores,
     cpu_workers,
@@ -15,7 +15,7 @@ from pimann.parallel import (
     training_threads,
     usable_cores,
 )
-from pimann.params import load_params
+from pimann.core.params import load_params
 
 
 def test_free_cores_leave_the_busy_ones_and_keep_one():

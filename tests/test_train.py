@@ -4,51 +4,30 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-import io
 import json
-import pickle
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
 import torch
-from test_features import break_features, synthetic_collection
+from builders import (
+    BROKEN_MODELS,
+    SMALL_MODEL,
+    _weights,
+    break_features,
+    break_model,
+    save_small_model,
+    trains_differently_and_deterministically,
+)
 
-from pimann.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
-from pimann.errors import PimannError
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import build_dataset, write_dataset
-from pimann.mann import MANN
-from pimann.model_files import load_model, save_model
-from pimann.params import ModelParams, load_params
-from pimann.train import train_models
-from pimann.training_loss import TrainingLoss
-
-SMALL_MODEL = ModelParams(
-    n_experts=2, gating_hidden=8, gating_layers=3, prediction_hidden=32, prediction_layers=3,
-    dropout=0.3, activation="elu",
-)  # fmt: skip
-
-
-@pytest.fixture(scope="module")
-def params():
-    base = load_params()
-    train = dataclasses.replace(base.train, epochs=4, batch_size=64, device="cpu")
-    return dataclasses.replace(base, model=SMALL_MODEL, train=train)
-
-
-@pytest.fixture(scope="module")
-def dataset_path(tmp_path_factory, params):
-    """A tiny dataset: 4 synthetic sources and their 'mirrors', ~50 samples each."""
-    dataset = build_dataset(synthetic_collection(n_sources=4, frames=160), params.features, "full")
-    path = tmp_path_factory.mktemp("features") / "full.h5"
-    write_dataset(path, dataset)
-    return path
-
-
-def _weights(directory) -> dict[str, torch.Tensor]:
-    return torch.load(directory / "model.pt", weights_only=True)["state_dict"]
+from pimann.core.errors import PimannError
+from pimann.learn.dataset import write_dataset
+from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
+from pimann.learn.mann import MANN
+from pimann.learn.model_files import load_model
+from pimann.learn.train import train_models
+from pimann.learn.training_loss import TrainingLoss
 
 
 def test_schedule_and_order():
@@ -115,7 +94,7 @@ def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
 
 def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
     """data_contacts trains on the data's flags, differs from lower_sole, and needs them."""
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     contacts = dataclasses.replace(
         params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
@@ -136,7 +115,7 @@ def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
 
 
 def test_pi_term_enters_the_gradient(params, dataset_path):
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -158,104 +137,6 @@ def test_pi_term_enters_the_gradient(params, dataset_path):
         pred = model(x)
         assert truth(pred, y)[1] > 0 and loss(pred, y)[1] > 0
         assert not torch.allclose(truth(pred, y)[1], loss(pred, y)[1])
-
-
-def save_small_model(directory: Path) -> Path:
-    """A valid model folder (untrained: only its reading is under test here)."""
-    layout = window_layout(load_params().features, 50.0, "full")
-    n_in, n_out = layout.input_dim, layout.output_dim
-    stats = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
-    model = MANN(n_in, n_out, SMALL_MODEL, seeds=[3])
-    meta = {"pi_weight": 1.0, "seed": 3, "variant": "full", "standing": None,
-            "params": {"model": dataclasses.asdict(SMALL_MODEL)}}  # fmt: skip
-    save_model(directory, model, layout, stats, meta)
-    return directory
-
-
-def _blob(change):
-    """model.pt re-saved after change(its dictionary)."""
-
-    def apply(folder: Path) -> None:
-        blob = torch.load(folder / "model.pt", weights_only=True)
-        change(blob)
-        torch.save(blob, folder / "model.pt")
-
-    return apply
-
-
-def _file(name: str, change=None):
-    """File `name` rewritten as change(its bytes), or removed (None)."""
-
-    def apply(folder: Path) -> None:
-        path = folder / name
-        if change is None:
-            path.unlink()
-        else:
-            path.write_bytes(change(path.read_bytes()))
-
-    return apply
-
-
-def _model(data: bytes):
-    return _file("model.pt", lambda _: data)
-
-
-def _meta(data: bytes):
-    return _file("meta.json", lambda _: data)
-
-
-def _torch_bytes(value) -> bytes:
-    buffer = io.BytesIO()
-    torch.save(value, buffer)
-    return buffer.getvalue()
-
-
-def _first_weight(blob: dict) -> torch.Tensor:
-    return blob["state_dict"]["expert_weight_0"]
-
-
-# kind: (the file named, how a good model folder is broken, what the error says)
-BROKEN_MODELS = {
-    "absent": ("model.pt", _file("model.pt"), "no trained model here"),
-    "empty": ("model.pt", _model(b""), "empty or cut short"),
-    "truncated": ("model.pt", _file("model.pt", lambda data: data[:900]),
-                  "not a PyTorch checkpoint"),
-    "text": ("model.pt", _model(b"weights: 1 2 3\n"), "not a PyTorch checkpoint"),
-    "pickle": ("model.pt", _model(pickle.dumps({"state_dict": {}})), "not a PyTorch checkpoint"),
-    "list": ("model.pt", _model(_torch_bytes([1, 2])), "holds a list, not a trained model"),
-    "lacks_stats": ("model.pt", _blob(lambda b: b.pop("stats")), r"lacks \['stats'\]"),
-    "lacks_weight": ("model.pt", _blob(lambda b: b["state_dict"].pop("expert_bias_0")),
-                     r"state_dict does not fit model_params: lacks \['expert_bias_0'\]"),
-    "wrong_shape": ("model.pt",
-                    _blob(lambda b: b["state_dict"].update(expert_weight_0=torch.zeros(2, 3))),
-                    r"state_dict\['expert_weight_0'\] is \(2, 3\), the model needs"),
-    "other_network": ("model.pt", _blob(lambda b: b["model_params"].update(n_experts=3)),
-                      "state_dict.* the model needs"),
-    "model_params": ("model.pt", _blob(lambda b: b["model_params"].update(depth=3)),
-                     "model_params: .*'depth'"),
-    "nan": ("model.pt", _blob(lambda b: _first_weight(b)[0, 1].fill_(float("nan"))),
-            r"state_dict\['expert_weight_0'\] holds NaN"),
-    "nan_stats": ("model.pt", _blob(lambda b: b["stats"]["y_std"][4].fill_(float("inf"))),
-                  r"stats\['y_std'\] holds NaN"),
-    "stats_shape": ("model.pt", _blob(lambda b: b["stats"].update(x_mean=torch.zeros(5))),
-                    r"stats\['x_mean'\] is \(5,\)"),
-    "layout_not_json": ("model.pt", _blob(lambda b: b.update(layout="{offsets")),
-                        "layout: not a feature layout"),
-    "layout_dims": ("model.pt", _blob(lambda b: b.update(input_dim=b["input_dim"] - 1)),
-                    "do not fit the layout's"),
-    "meta_absent": ("meta.json", _file("meta.json"), "cannot read the model's metadata"),
-    "meta_not_json": ("meta.json", _meta(b"{seed: 3"), "not JSON"),
-    "meta_binary": ("meta.json", _meta(b"\xff\xfe\x00"), "not JSON"),
-    "meta_no_seed": ("meta.json", _meta(b'{"pi_weight": 1.0}'), "no integer 'seed'"),
-    "meta_list": ("meta.json", _meta(b"[3]"), "no integer 'seed'"),
-}  # fmt: skip
-
-
-def break_model(folder: Path, kind: str) -> tuple[Path, str]:
-    """Break the good model folder as `kind`; (the file the error names, what it says)."""
-    name, breaker, message = BROKEN_MODELS[kind]
-    breaker(folder)
-    return folder / name, message
 
 
 @pytest.fixture(scope="module")
@@ -292,7 +173,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
     """`train.pi_gradient`: L_B's gradient reaches the base velocity outputs only with `both`
     or `base`, the joint velocity outputs unless `base`, the configuration (base pose, joints)
     unless `base` or `joint_velocities`; the loss's value is the same."""
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
@@ -317,7 +198,7 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
 def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_path):
     """pi_dropout false: L_B is the dropout-free prediction's (the eval-mode network's), L_D
     keeps its dropout; the training then differs from the paper's and stays deterministic."""
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
@@ -347,7 +228,7 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
 
 
 def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(dataset_path):
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     layout = read_dataset(dataset_path).layout
     mask = layout.fed_back_columns()
@@ -363,7 +244,7 @@ def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(datase
 def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_path):
     """Each member's noise comes from its own seed and epoch: alike in any group, new each
     epoch; nothing where the std is 0 (the paper)."""
-    from pimann.features import read_dataset
+    from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
     columns = data.layout.fed_back_columns()
@@ -380,21 +261,6 @@ def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_p
     assert not torch.allclose(moved[0], moved[1])
     pair.start_epoch(4)
     assert not torch.allclose(pair(x) - x, moved)
-
-
-def trains_differently_and_deterministically(tmp_path, params, dataset_path, pi_weight, **change):
-    """Training with `change` to params.train twice gives the same weights, and not those of
-    training without it (every switch of this kind off)."""
-    plain = dataclasses.replace(params.train, input_noise=0.0, rollout_states=0.0)
-    changed = dataclasses.replace(plain, **change)
-    for name, train in (("plain", plain), ("changed", changed), ("changed_again", changed)):
-        run = dataclasses.replace(params, train=train)
-        train_models(dataset_path, tmp_path / name, pi_weight, [0], run, "cpu")
-    a, b = _weights(tmp_path / "changed" / "0"), _weights(tmp_path / "changed_again" / "0")
-    assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
-    assert not torch.equal(
-        a["expert_weight_2"], _weights(tmp_path / "plain" / "0")["expert_weight_2"]
-    )
 
 
 def test_input_noise_trains_differently_and_deterministically(tmp_path, params, dataset_path):
@@ -427,8 +293,8 @@ BF16_LOSS_RTOL = 0.01
 
 
 def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
-    from pimann.features import read_dataset
-    from pimann.train import autocast
+    from pimann.learn.dataset import read_dataset
+    from pimann.learn.train import autocast
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
@@ -451,7 +317,7 @@ def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
 
 
 def test_precision_auto_follows_the_cpu_flags(tmp_path):
-    from pimann.train import cpu_has_bf16, pick_precision
+    from pimann.learn.train import cpu_has_bf16, pick_precision
 
     with_bf16, without = tmp_path / "with", tmp_path / "without"
     with_bf16.write_text("processor : 0\nflags : fpu sse2 avx512f avx512_bf16 amx_tile\n")

@@ -6,9 +6,9 @@ import h5py
 import numpy as np
 import pytest
 
-from pimann.errors import PimannError
-from pimann.robot import JOINT_NAMES
-from pimann.trajectory import (
+from pimann.core.errors import PimannError
+from pimann.core.robot import JOINT_NAMES
+from pimann.core.trajectory import (
     Trajectory,
     iter_collection,
     read_trajectory,

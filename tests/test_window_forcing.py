@@ -6,10 +6,10 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from pimann.feature_layout import Normalisation, window_layout
-from pimann.features import clip_features
-from pimann.params import load_params
-from pimann.window_forcing import forced_rollouts, gait_measures
+from pimann.core.params import load_params
+from pimann.generate.window_forcing import forced_rollouts, gait_measures
+from pimann.learn.feature_layout import Normalisation, window_layout
+from pimann.learn.features import clip_features
 
 PARAMS = load_params()
 

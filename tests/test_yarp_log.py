@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.io import mocap_format, mocap_info, read_mocap
 from pimann.mocap.yarp_log import read_yarp_log, write_yarp_log, yarp_log_info
-from pimann.robot import SEGMENTS
 
 
 def random_motion(rng: np.random.Generator, n: int = 12) -> HumanMotion:

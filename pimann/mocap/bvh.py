@@ -17,11 +17,11 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError, require_finite
+from pimann.core.errors import PimannError, require_finite
+from pimann.core.params import SkeletonParams
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.skeletons import BodyLandmarks, calibrate_segments, recognise_skeleton
-from pimann.params import SkeletonParams
-from pimann.robot import SEGMENTS
 
 _ROTATION_CHANNELS = ("Xrotation", "Yrotation", "Zrotation")
 _POSITION_CHANNELS = ("Xposition", "Yposition", "Zposition")

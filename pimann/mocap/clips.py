@@ -18,12 +18,12 @@ from pathlib import Path
 
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.intervals import true_runs
+from pimann.core.contacts import true_runs
+from pimann.core.errors import PimannError
+from pimann.core.params import DataParams, SkeletonParams, SourceParams
+from pimann.core.paths import bandai_label_files, resolve_shared, shared_glob
 from pimann.mocap.bvh import read_bvh
 from pimann.mocap.human_motion import HumanMotion
-from pimann.params import DataParams, SkeletonParams, SourceParams
-from pimann.paths import bandai_label_files, resolve_shared, shared_glob
 
 _NAME = re.compile(r"^dataset-(\d+)_(.+)_([^_]+)_(\d+)$")
 PAUSE_SPEED = 0.1  # m/s: the pelvis moves horizontally slower than this while standing ...

@@ -6,8 +6,8 @@ import dataclasses
 
 import numpy as np
 
-from pimann.errors import PimannError, require_finite
-from pimann.robot import SEGMENTS
+from pimann.core.errors import PimannError, require_finite
+from pimann.core.robot import SEGMENTS
 
 
 @dataclasses.dataclass

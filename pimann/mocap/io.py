@@ -10,11 +10,11 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.params import SkeletonParams
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.mvnx import mvnx_info, read_mvnx
 from pimann.mocap.yarp_log import PREFIX, read_yarp_log, yarp_log_info
-from pimann.params import SkeletonParams
 
 SNIFF_BYTES = 1 << 16
 BVH_JOINT = re.compile(r"^\s*(?:ROOT|JOINT)\s+(\S+)", re.MULTILINE)

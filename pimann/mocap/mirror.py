@@ -17,9 +17,9 @@ import dataclasses
 
 import numpy as np
 
+from pimann.core.robot import JOINT_NAMES, SEGMENTS, mirror_joint_name
+from pimann.core.trajectory import Trajectory
 from pimann.mocap.human_motion import HumanMotion
-from pimann.robot import JOINT_NAMES, SEGMENTS, mirror_joint_name
-from pimann.trajectory import Trajectory
 
 REFLECTION = np.diag([1.0, -1.0, 1.0])
 # Central joints whose axis lies in the sagittal plane (roll about x, yaw about z): they flip.

@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
-from pimann.robot import SEGMENTS
 
 
 def _local(tag: str) -> str:

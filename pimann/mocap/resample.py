@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pimann.errors import PimannError
+from pimann.core.errors import PimannError
 from pimann.mocap.human_motion import HumanMotion
 
 

@@ -23,9 +23,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.params import SkeletonParams
-from pimann.robot import SEGMENTS
+from pimann.core.errors import PimannError
+from pimann.core.params import SkeletonParams
+from pimann.core.robot import SEGMENTS
 
 SIDES = ("Left", "Right")
 _SIDE_WORDS = {"{Left}": SIDES, "{L}": ("L", "R"), "{l}": ("l", "r")}

@@ -31,10 +31,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from pimann.atomic import atomic_path
-from pimann.errors import PimannError
+from pimann.core.atomic import atomic_path
+from pimann.core.errors import PimannError
+from pimann.core.robot import SEGMENTS
 from pimann.mocap.human_motion import HumanMotion
-from pimann.robot import SEGMENTS
 
 log = logging.getLogger(__name__)
 

@@ -15,18 +15,18 @@ import numpy as np
 import pinocchio as pin
 from pink.exceptions import PinkError
 
-from pimann.contacts import FootKinematics, foot_kinematics
-from pimann.errors import PimannError
+from pimann.core.contacts import FootKinematics, foot_kinematics
+from pimann.core.errors import PimannError
+from pimann.core.params import Params, RetargetParams
+from pimann.core.robot import SEGMENTS, Robot, load_robot
+from pimann.core.rotations import rot_z, yaw_of
+from pimann.core.trajectory import Trajectory
 from pimann.mocap.clips import Clip, Take, clip_motion, read_take, take_clips, take_of
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.resample import resample
-from pimann.params import Params, RetargetParams
 from pimann.retarget.feet import human_contacts, plan_soles
 from pimann.retarget.ik import RetargetIK
 from pimann.retarget.targets import leg_length_ratio, segment_targets
-from pimann.robot import SEGMENTS, Robot, load_robot
-from pimann.rotations import rot_z, yaw_of
-from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 

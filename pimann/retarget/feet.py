@@ -28,11 +28,11 @@ import dataclasses
 
 import numpy as np
 
-from pimann.intervals import true_runs
+from pimann.core.contacts import true_runs
+from pimann.core.params import RetargetParams
+from pimann.core.robot import SEGMENTS
+from pimann.core.rotations import yaw_of
 from pimann.mocap.human_motion import HumanMotion
-from pimann.params import RetargetParams
-from pimann.robot import SEGMENTS
-from pimann.rotations import yaw_of
 
 # share of a swing at each end with no horizontal motion. Short, so the sole clears the
 # evaluation's 2 cm contact height soon after lift-off and late before touchdown: with 0.2 and

@@ -25,8 +25,8 @@ import pinocchio as pin
 from pink.limits import ConfigurationLimit, Limit
 from pink.tasks import FrameTask, PostureTask
 
-from pimann.params import RetargetParams
-from pimann.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, corner_offsets
+from pimann.core.params import RetargetParams
+from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE, SEGMENTS, Robot, corner_offsets
 
 FEET = ("LeftFoot", "RightFoot")
 SHOULDER_ROLLS = ("l_shoulder_roll", "r_shoulder_roll")

@@ -9,17 +9,17 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pimann.contacts import FEET, trajectory_configurations
-from pimann.mocap.human_motion import HumanMotion
-from pimann.params import RetargetParams
-from pimann.retarget.targets import segment_targets
-from pimann.robot import (
+from pimann.core.contacts import FEET, trajectory_configurations
+from pimann.core.params import RetargetParams
+from pimann.core.robot import (
     JOINT_NAMES,
     SEGMENTS,
     corner_offsets,
     load_robot,
 )
-from pimann.trajectory import Trajectory
+from pimann.core.trajectory import Trajectory
+from pimann.mocap.human_motion import HumanMotion
+from pimann.retarget.targets import segment_targets
 
 AT_LIMIT_RAD = 0.01  # a joint within this of a bound counts as "at its limit"
 FLOOR_TOLERANCE = -0.005  # m: a corner lower than this is "below the floor"

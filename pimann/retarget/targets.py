@@ -18,10 +18,10 @@ from functools import cache
 import numpy as np
 import pinocchio as pin
 
+from pimann.core.params import RetargetParams
+from pimann.core.robot import JOINT_NAMES, SEGMENTS, Robot, load_robot
+from pimann.core.rotations import rot_z, yaw_only
 from pimann.mocap.human_motion import HumanMotion
-from pimann.params import RetargetParams
-from pimann.robot import JOINT_NAMES, SEGMENTS, Robot, load_robot
-from pimann.rotations import rot_z, yaw_only
 
 FEET = ("LeftFoot", "RightFoot")
 

@@ -11,6 +11,8 @@ run: the closed loop, `simulate_trajectory(trajectory, params, controller=...)`.
 synthetic: a kinematic stepping trajectory for tests and benchmarks.
 results: a run written to (and read from) HDF5, the ZMP-outside-the-support figure.
 video: offscreen MuJoCo rendering of a run (stick-figure fallback without OpenGL).
+
+Under 60 lines: a package docstring and the headless GL backend choice.
 """
 
 import os

@@ -21,9 +21,9 @@ import time
 import casadi as ca
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.params import MpcParams
-from pimann.rotations import rot_z
+from pimann.core.errors import PimannError
+from pimann.core.params import MpcParams
+from pimann.core.rotations import rot_z
 from pimann.sim.footsteps import FootstepPlan
 
 GRAVITY = np.array([0.0, 0.0, -9.81])

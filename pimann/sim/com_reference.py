@@ -12,12 +12,12 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pimann.errors import PimannError
-from pimann.params import SimulateParams
-from pimann.robot import Robot
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import Robot
+from pimann.core.trajectory import Trajectory
 from pimann.sim.dcm import SHIFT_MAX
 from pimann.sim.footsteps import FootstepPlan, mid_feet, sole_trajectories
-from pimann.trajectory import Trajectory
 
 
 def _rotate(xy: np.ndarray, yaw: np.ndarray) -> np.ndarray:

@@ -15,10 +15,10 @@ import logging
 import casadi as ca
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.intervals import true_runs
-from pimann.params import SimulateParams
-from pimann.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
+from pimann.core.contacts import true_runs
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.sim.footsteps import FootstepPlan
 
 GRAVITY = 9.81

@@ -14,13 +14,13 @@ import dataclasses
 import numpy as np
 import pinocchio as pin
 
-from pimann.errors import PimannError
-from pimann.intervals import true_runs
-from pimann.params import SimulateParams
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, Robot
-from pimann.rotations import rot_z
+from pimann.core.contacts import true_runs
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, Robot
+from pimann.core.rotations import rot_z
+from pimann.core.trajectory import Trajectory
 from pimann.sim.wbc import SOLE_HEIGHT
-from pimann.trajectory import Trajectory
 
 
 @dataclasses.dataclass

@@ -14,10 +14,10 @@ import re
 import mujoco
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.params import SimulateParams
-from pimann.paths import robots_dir
-from pimann.robot import JOINT_NAMES, MESH_DIRS, MODEL_FILES, Robot
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.paths import robots_dir
+from pimann.core.robot import JOINT_NAMES, MESH_DIRS, MODEL_FILES, Robot
 
 BASE_BODY = "root_link"
 FOOT_BODIES = ("l_ankle_2", "r_ankle_2")  # the foot boxes are fused into these bodies

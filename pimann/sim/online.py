@@ -15,7 +15,7 @@ import dataclasses
 import mujoco
 import numpy as np
 
-from pimann.params import SimulateParams
+from pimann.core.params import SimulateParams
 from pimann.sim.centroidal_mpc import (
     GRAVITY,
     CentroidalMPC,

@@ -17,16 +17,16 @@ from typing import Any
 
 import numpy as np
 
-from pimann.errors import PimannError
-from pimann.params import SimulateParams
-from pimann.robot import load_robot
-from pimann.rotations import rot_z
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import load_robot
+from pimann.core.rotations import rot_z
+from pimann.core.trajectory import Trajectory
 from pimann.sim.footsteps import FootstepPlan, extract_footsteps
 from pimann.sim.online import Push
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
-from pimann.trajectory import Trajectory
 
 DIRECTIONS = ("lateral", "forward")
 log = logging.getLogger(__name__)

@@ -1,6 +1,6 @@
 """A simulation run on disk: the simulated robot as a trajectory file plus the controller's traces.
 
-The file follows the trajectory contract (pimann.trajectory: `time`, `base_position`,
+The file follows the trajectory contract (pimann.core.trajectory: `time`, `base_position`,
 `base_quaternion_xyzw`, `joint_positions` = the measured joints, `contacts` from the foot
 forces, `com_position`), so `read_trajectory`, `pimann metrics` and `pimann render` read it
 as they read a rollout. Beside it: the joint traces the joint-tracking figure reads
@@ -16,12 +16,12 @@ from typing import Any
 import h5py
 import numpy as np
 
-from pimann.atomic import atomic_path
-from pimann.errors import PimannError
-from pimann.params import SimulateParams
-from pimann.robot import JOINT_NAMES, SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
+from pimann.core.atomic import atomic_path
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import JOINT_NAMES, SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
+from pimann.core.trajectory import Trajectory, write_trajectory
 from pimann.sim.run import SimulationResult
-from pimann.trajectory import Trajectory, write_trajectory
 
 CONTACT_FORCE_N = 20.0  # N of normal force for a foot to count as in contact
 TRACES = (
@@ -84,7 +84,8 @@ def foot_rectangle(position: np.ndarray, yaw: float, half_length: float, half_wi
 def zmp_outside_support(result: SimulationResult, params: SimulateParams) -> np.ndarray:
     """(K,) m: measured ZMP's distance outside the measured support polygon, 0 inside.
 
-    The polygon is the hull of the sole rectangles (pimann.robot's `SOLE_HALF_LENGTH` x `_WIDTH`,
+    The polygon is the hull of the sole rectangles (pimann.core.robot's `SOLE_HALF_LENGTH` x
+    `_WIDTH`,
     no margin) of the feet the floor pushes on (> CONTACT_FORCE_N), at their simulated
     positions with the plan's yaw; the ZMP is taken back to the simulation's world (the
     trace has the feet's drift removed, com_world - com_measured). The plan's contacts would

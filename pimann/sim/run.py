@@ -21,9 +21,10 @@ import mujoco
 import numpy as np
 import pinocchio as pin
 
-from pimann.errors import PimannError
-from pimann.params import SimulateParams
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot, load_robot
+from pimann.core.errors import PimannError
+from pimann.core.params import SimulateParams
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot, load_robot
+from pimann.core.trajectory import Trajectory
 from pimann.sim.com_reference import com_reference
 from pimann.sim.dcm import DCMPlan, knot_times, plan_dcm
 from pimann.sim.footsteps import FootstepPlan, extract_footsteps
@@ -31,7 +32,6 @@ from pimann.sim.model import SimModel, build_sim_model
 from pimann.sim.online import OnlineReference, Push, centroidal_state
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback
-from pimann.trajectory import Trajectory
 
 TRACE_KEYS = (
     "t", "ref", "meas", "gen", "com_ref", "com", "zmp_ref", "zmp", "h", "ik", "soles", "soles_ref",

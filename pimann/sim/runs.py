@@ -15,17 +15,17 @@ import math
 from pathlib import Path
 from typing import Any
 
-from pimann.atomic import atomic_path, write_text_atomic
-from pimann.errors import PimannError, about
-from pimann.params import Params, SimulateRun, as_dict
-from pimann.paths import repo_relative
-from pimann.progress import track
-from pimann.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.core.atomic import atomic_path, write_text_atomic
+from pimann.core.errors import PimannError, about
+from pimann.core.params import Params, SimulateRun, as_dict
+from pimann.core.paths import repo_relative
+from pimann.core.progress import track
+from pimann.core.trajectory import read_trajectory
+from pimann.generate.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
 from pimann.sim.pushes import plot_push_recovery, push_records, push_recovery
 from pimann.sim.results import write_simulation
 from pimann.sim.run import simulate_trajectory
 from pimann.sim.video import render_simulation
-from pimann.trajectory import read_trajectory
 
 log = logging.getLogger(__name__)
 

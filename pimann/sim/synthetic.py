@@ -10,11 +10,11 @@ import dataclasses
 
 import numpy as np
 
-from pimann.params import SimulateParams
-from pimann.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
+from pimann.core.params import SimulateParams
+from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
+from pimann.core.trajectory import Trajectory
 from pimann.sim.footsteps import FootstepPlan, Footsteps, compose
 from pimann.sim.wbc import IKTargets, WholeBodyIK, standing_pose
-from pimann.trajectory import Trajectory
 
 
 def standing_feet(robot: Robot, q: np.ndarray) -> np.ndarray:

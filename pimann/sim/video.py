@@ -2,7 +2,7 @@
 
 Rendering replays the recorded base pose and joints in the visual model (meshes kept), so
 it works from a result file as well as from a run. Without a working OpenGL backend (no
-EGL, no display) it falls back to pimann.render's matplotlib stick figure of the same
+EGL, no display) it falls back to pimann.render.trajectory's matplotlib stick figure of the same
 trajectory: a stage never fails for want of a GPU context.
 """
 
@@ -14,16 +14,16 @@ from pathlib import Path
 
 import numpy as np
 
-from pimann.params import SimulateParams
-from pimann.render import (
+from pimann.core.params import SimulateParams
+from pimann.core.robot import load_robot
+from pimann.core.trajectory import Trajectory
+from pimann.render.trajectory import (
     STRIP_FRAMES,
     check_output,
     render_trajectory,
     strip_frame_indices,
     write_pictures,
 )
-from pimann.robot import load_robot
-from pimann.trajectory import Trajectory
 
 log = logging.getLogger(__name__)
 CAMERA = {"distance": 2.6, "azimuth": 150.0, "elevation": -10.0, "height": 0.5}
@@ -84,7 +84,7 @@ def render_simulation(
 
     MP4 and GIF play every `every_n_frames`-th sample in real time; PNG puts `strip_frames`
     evenly spaced frames in rows of four. `use_mujoco=False`, or a GL backend that does not
-    start, draws pimann.render's stick figure instead.
+    start, draws pimann.render.trajectory's stick figure instead.
     """
     output_path = Path(output_path)
     suffix = check_output(output_path)

@@ -16,9 +16,9 @@ import pinocchio as pin
 from pink import Configuration, solve_ik
 from pink.tasks import ComTask, FrameTask, PostureTask
 
-from pimann.params import SimulateParams
-from pimann.robot import CHEST_FRAME, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
-from pimann.rotations import rot_z
+from pimann.core.params import SimulateParams
+from pimann.core.robot import CHEST_FRAME, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
+from pimann.core.rotations import rot_z
 
 SOLE_HEIGHT = 0.002  # the foot boxes' bottoms lie this far above the sole frames (SPEC 9.1)
 

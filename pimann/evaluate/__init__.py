@@ -1,0 +1,2 @@
+"""Evaluation (paper Sec. V): the metrics, the claims, command following, the data report and
+its reference, and the results reader the report's figures use."""

@@ -1,0 +1,400 @@
+"""The paper's claims (Sec. IV, SPEC 8) against our metrics: one row each in results/claims.md.
+
+Every claim names its metric: the velocity-level sliding RMSE (the authors';
+pimann.evaluate.metrics),
+the position-level one (the feet of the trajectory a robot would track), base poses or foot
+pitch; its status follows pimann.evaluate.claim_rules (`RULES`: seed ranges must separate; a claim
+that holds only because a model stands still says so). C1 compares the baseline's magnitude
+with the paper's: the angular part directly, the linear part in the authors' world
+representation, within a factor `C1_FACTOR`.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from pimann.core.params import FiguresParams
+from pimann.evaluate.claim_rules import (
+    C1_FACTOR,
+    FAILS,
+    HOLDS,
+    NOT_COMPARABLE,
+    POSITION,
+    REFERENCE,
+    RMSE_FIGURE,
+    RULES,
+    STANDS_STILL,
+    VELOCITY,
+    WITHIN_SPREAD,
+    Claim,
+    SeedData,
+    claims_markdown,
+    combine,
+    configuration_held_cause,
+    data_claim,
+    fmt,
+    missing,
+    order,
+    span,
+    stands_still,
+    velocity_level_cause,
+)
+from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
+from pimann.generate.rollout_layout import BASELINE, weight_label
+
+__all__ = [
+    "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "POSITION",
+    "REFERENCE", "RULES", "STANDS_STILL", "VELOCITY", "WITHIN_SPREAD", "Claim",
+    "claims_markdown", "data_claim", "evaluate_claims",
+]  # fmt: skip
+
+
+def evaluate_claims(
+    frame: pd.DataFrame,
+    figures: FiguresParams,
+    pi_weight: float,
+    representation: str = "local_world_aligned",
+    pi_gradient: str = "both",
+) -> list[Claim]:
+    """Each claim of the paper's Sec. IV (SPEC 8) against our metrics, by the `RULES`.
+
+    `pi_weight`: evaluate.pi_weight, the featured PI model (drift and steering claims);
+    `representation`: evaluate.foot_velocity_frame, the linear part of the sliding columns.
+    """
+    if frame.empty or not (frame["scenario"] == figures.scenario).any():
+        return [
+            Claim("C0", "any", "-", "-", "n/a", NOT_COMPARABLE, f"no {figures.scenario} rollouts")
+        ]
+    data = SeedData(frame, figures.scenario, representation)
+    return [
+        _baseline_magnitude(data),
+        *(_lower_than_baseline(data, figures, kind) for kind in ("linear", "angular")),
+        _especially_angular(data, figures),
+        _decreasing_up_to(data, figures, pi_weight),
+        _compared_walk(data, figures),
+        *(_large_weight_walks(data, figures, steering) for steering in (False, True)),
+        _foot_pitch_grows(data, figures, pi_gradient),
+        *(_steering_removes(data, figures, pi_weight, axis) for axis in ("y", "yaw")),
+        _pi_drifts_more(data, figures, pi_weight),
+        _steered_beats_baseline(data, figures, pi_weight),
+        _pi_reduces_foot_motion(data, figures),
+    ]
+
+
+def _rmse(kind: str) -> str:
+    return f"support_rmse_{kind}_total"
+
+
+def _baseline_magnitude(data: SeedData) -> Claim:
+    claim = Claim(
+        "C1", "Baseline support-foot sliding: total RMSE 22.88 (linear), 17.74 (angular)",
+        "Sec. IV-A: 22.88 m/s, 17.74 rad/s", RMSE_FIGURE,
+        metric=f"{VELOCITY}; linear part in the authors' world representation",
+    )  # fmt: skip
+    world = data.values(BASELINE, False, _rmse("linear_world"))
+    angular = data.values(BASELINE, False, _rmse("angular"))
+    ours = data.median(BASELINE, False, _rmse("linear"))
+    if not len(world) or not len(angular):
+        return missing(claim, "the baseline")
+    ratios = {
+        "linear": float(np.median(world)) / PAPER_BASELINE_RMSE["linear"],
+        "angular": float(np.median(angular)) / PAPER_BASELINE_RMSE["angular"],
+    }
+    off = [f"{k} x{r:.2f}" for k, r in ratios.items() if not 1 / C1_FACTOR <= r <= C1_FACTOR]
+    text = (
+        f"linear {span(world)} (world; {fmt(ours)} {data.representation}), angular "
+        f"{span(angular)}; x{ratios['linear']:.2f}, x{ratios['angular']:.2f} the paper's"
+    )
+    claim = dataclasses.replace(
+        claim, ours=text, status=FAILS if off else HOLDS,
+        reason=f"{', '.join(off)} the paper's: outside a factor {C1_FACTOR:g}" if off
+        else f"both within a factor {C1_FACTOR:g} of the paper's",
+    )  # fmt: skip
+    return stands_still(data, claim, [(BASELINE, False)])
+
+
+def _lower_than_baseline(data: SeedData, figures: FiguresParams, kind: str) -> Claim:
+    weights = figures.box_weights
+    claim = Claim(
+        "C2" if kind == "linear" else "C3",
+        f"PI models slide less than the baseline ({kind} total RMSE) for all w in "
+        f"{{{', '.join(weight_label(w) for w in weights)}}}",
+        f"Fig. pi_weight_comparison_plot ({kind})", RMSE_FIGURE, metric=VELOCITY,
+    )  # fmt: skip
+    baseline = data.values(BASELINE, False, _rmse(kind))
+    values = {w: data.values(data.model(w), False, _rmse(kind)) for w in weights}
+    if not len(baseline) or any(not len(v) for v in values.values()):
+        return missing(claim, "the baseline or a weight")
+    orders = {w: order(v, baseline) for w, v in values.items()}
+    status = combine(orders.values())
+    weak = [weight_label(w) for w, s in orders.items() if s == status]
+    claim = dataclasses.replace(
+        claim, status=status,
+        ours=f"baseline {span(baseline)}; "
+        + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items()),
+        reason="every seed below every baseline seed" if status == HOLDS
+        else f"w={', '.join(weak)}: seed ranges overlap the baseline's"
+        if status == WITHIN_SPREAD else f"w={', '.join(weak)}: median not below the baseline",
+    )  # fmt: skip
+    if status != HOLDS and kind == "linear":
+        claim = dataclasses.replace(
+            claim, reason=claim.reason + velocity_level_cause(data, weights)
+        )
+    return stands_still(data, claim, [(data.model(w), False) for w in weights])
+
+
+def _reduction(data: SeedData, weights: Sequence[float], kind: str) -> float | None:
+    baseline = data.median(BASELINE, False, _rmse(kind))
+    medians = [data.median(data.model(w), False, _rmse(kind)) for w in weights]
+    if baseline is None or not baseline or any(v is None for v in medians):
+        return None
+    return float(np.mean([1.0 - v / baseline for v in medians]))
+
+
+def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
+    claim = Claim(
+        "C4", "The reduction is largest for the angular velocities",
+        "Sec. IV-A, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
+    )  # fmt: skip
+    linear = _reduction(data, figures.box_weights, "linear")
+    angular = _reduction(data, figures.box_weights, "angular")
+    if linear is None or angular is None:
+        return missing(claim, "the baseline or a weight")
+    if linear <= 0 or angular <= 0:
+        status, reason = (
+            FAILS,
+            "no reduction in "
+            + " and ".join(k for k, r in (("linear", linear), ("angular", angular)) if r <= 0)
+            + (velocity_level_cause(data, figures.box_weights) if linear <= 0 else ""),
+        )
+    elif angular > linear:
+        status, reason = HOLDS, "both reduced, angular more"
+    else:
+        status, reason = FAILS, "linear reduced at least as much"
+    claim = dataclasses.replace(
+        claim, status=status, reason=reason,
+        ours=f"mean relative reduction of the seed medians vs baseline: linear {linear:.0%}, "
+        f"angular {angular:.0%}",
+    )  # fmt: skip
+    return stands_still(data, claim, [(data.model(w), False) for w in figures.box_weights])
+
+
+def _decreasing_up_to(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+    weights = sorted(w for w in figures.box_weights if w <= pi_weight)
+    claim = Claim(
+        "C5", f"Sliding decreases as w grows up to w={weight_label(pi_weight)}",
+        "Sec. IV-C2, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
+    )  # fmt: skip
+    parts, orders = [], {}
+    for kind in ("linear", "angular"):
+        values = [data.values(data.model(w), False, _rmse(kind)) for w in weights]
+        if any(not len(v) for v in values) or len(values) < 2:
+            return missing(claim, f"w in {weights}")
+        parts.append(f"{kind}: " + ", ".join(
+            f"w={weight_label(w)}: {span(v)}" for w, v in zip(weights, values, strict=True)
+        ))  # fmt: skip
+        orders[kind] = combine(order(b, a) for a, b in zip(values, values[1:], strict=False))
+    status = combine(orders.values())
+    failing = [k for k, s in orders.items() if s == status]
+    claim = dataclasses.replace(
+        claim, ours="; ".join(parts), status=status,
+        reason="each w's seeds below the previous w's, both parts" if status == HOLDS
+        else f"{' and '.join(failing)}: "
+        + ("medians decrease, seed ranges overlap" if status == WITHIN_SPREAD
+           else "medians not strictly decreasing"),
+    )  # fmt: skip
+    return stands_still(data, claim, [(data.model(w), False) for w in weights[1:]])
+
+
+WALK_METRIC = (
+    "walking: forward base travel >= evaluate.walk_distance on >= "
+    f"{WALK_TOUCHDOWNS} touchdowns (base positions)"
+)
+
+
+def _compared_walk(data: SeedData, figures: FiguresParams) -> Claim:
+    weights = figures.box_weights
+    claim = Claim(
+        "C6", "Models with w in the comparison walk without steering (implied)",
+        "Sec. IV-C2 (only w=100 is said not to walk)", "base_displacement", metric=WALK_METRIC,
+    )  # fmt: skip
+    fractions = {w: data.walk_fraction(w, False) for w in weights}
+    if any(v is None for v in fractions.values()):
+        return missing(claim, "a weight")
+    short = [weight_label(w) for w, v in fractions.items() if v < 1.0]
+    return dataclasses.replace(
+        claim,
+        ours="walking seeds: "
+        + ", ".join(f"w={weight_label(w)}: {v:.0%}" for w, v in fractions.items()),
+        status=FAILS if short else HOLDS,
+        reason=f"some seeds of w={', '.join(short)} travel less than the walk distance"
+        if short
+        else "every seed walks",
+    )
+
+
+def _large_weight_walks(data: SeedData, figures: FiguresParams, steering: bool) -> Claim:
+    w = weight_label(figures.large_weight)
+    claim = Claim(
+        "C8" if steering else "C7",
+        f"w={w} models {'walk with' if steering else 'cannot walk without'} steering",
+        "Sec. IV-C2", "base_displacement", metric=WALK_METRIC,
+    )  # fmt: skip
+    fraction = data.walk_fraction(figures.large_weight, steering)
+    if fraction is None:
+        return missing(claim, f"w={w}")
+    holds = fraction == 1.0 if steering else fraction == 0.0
+    return dataclasses.replace(
+        claim,
+        ours=f"{fraction:.0%} of seeds walk",
+        status=HOLDS if holds else FAILS,
+        reason="as claimed"
+        if holds
+        else ("not every seed walks" if steering else "some seeds walk"),
+    )
+
+
+def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) -> Claim:
+    claim = Claim(
+        "C9", "Foot pitch in contact grows with w (heel-only stance at large w)",
+        "Sec. IV-C2, Fig. foot_rotations", "foot_rotations",
+        metric="max |sole pitch| in contact (poses)",
+    )  # fmt: skip
+    metric = "contact_sole_pitch_max_abs"
+    values = {w: data.values(data.model(w), figures.foot_steering, metric) for w in data.models}
+    values = {w: v for w, v in sorted(values.items()) if len(v)}
+    if len(values) < 3:
+        return missing(claim, "three weights or more")
+    from scipy.stats import spearmanr
+
+    medians = {w: float(np.median(v)) for w, v in values.items()}
+    rho = float(spearmanr(list(medians), list(medians.values())).statistic)
+    ends = list(values.values())
+    status = order(ends[0], ends[-1]) if rho >= 0.8 else FAILS
+    reason = {HOLDS: "grows with w (rho >= 0.8), largest w's seeds above the smallest w's",
+              WITHIN_SPREAD: "medians grow (rho >= 0.8), end seed ranges overlap"}.get(
+        status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)"
+    )  # fmt: skip
+    if status == FAILS:  # a weight whose rollouts stand keeps its feet flat: name it
+        walking = {w: data.walk_fraction(w, figures.foot_steering) for w in values}
+        standing = [f"w={weight_label(w)} ({f:.0%} of seeds walk)"
+                    for w, f in walking.items() if f is not None and f < 1.0]  # fmt: skip
+        if standing:
+            reason += "; not every seed walks at " + ", ".join(standing)
+        reason += configuration_held_cause(pi_gradient)
+    return dataclasses.replace(
+        claim, status=status, reason=reason,
+        ours="rad: " + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items())
+        + f"; Spearman rho of the medians {rho:.2f}",
+    )  # fmt: skip
+
+
+DRIFT_METRIC = "max |lateral| / |yaw| drift of the base (poses)"
+
+
+def _steering_removes(data: SeedData, figures: FiguresParams, pi_weight: float, axis: str) -> Claim:
+    metric = f"drift_{axis}_max_abs"
+    model = data.model(pi_weight)
+    claim = Claim(
+        "C10" if axis == "y" else "C11",
+        f"Steering removes the {'lateral (y)' if axis == 'y' else 'yaw'} drift of the PI model",
+        "Sec. IV-A, IV-C1, Figs. base_displacement_pid_ablation, ground_projection",
+        "base_displacement", metric=DRIFT_METRIC,
+    )  # fmt: skip
+    free, steered = data.values(model, False, metric), data.values(model, True, metric)
+    if not len(free) or not len(steered):
+        return missing(claim, f"w={weight_label(pi_weight)} with and without steering")
+    status = order(steered, figures.drift_reduction * free)
+    unit = "m" if axis == "y" else "rad"
+    claim = dataclasses.replace(
+        claim, status=status,
+        ours=f"w={weight_label(pi_weight)} max |{axis}| ({unit}): {span(free)} "
+        f"without, {span(steered)} with steering",
+        reason=f"steered {'seeds' if status == HOLDS else 'median'} "
+        f"{'above' if status == FAILS else 'below'} {figures.drift_reduction:g} x the unsteered "
+        + ("seeds" if status == HOLDS else "median"),
+    )  # fmt: skip
+    return stands_still(data, claim, [(model, True)])
+
+
+def _drift_pairs(data: SeedData, figures: FiguresParams, pi_weight: float, steering: bool):
+    model = data.model(pi_weight)
+    return {
+        axis: (data.values(BASELINE, False, f"drift_{axis}_max_abs"),
+               data.values(model, steering, f"drift_{axis}_max_abs"))
+        for axis in ("y", "yaw")
+    }  # fmt: skip
+
+
+def _drift_claim(claim: Claim, pairs, label: str, orders: dict[str, str], word: str) -> Claim:
+    status = combine(orders.values())
+    weak = [a for a, s in orders.items() if s == status]
+    return dataclasses.replace(
+        claim, status=status,
+        ours="; ".join(f"max |{a}|: baseline {span(b)}, {label} {span(p)}"
+                       for a, (b, p) in pairs.items()),
+        reason=f"y and yaw {word}, seed ranges separate" if status == HOLDS
+        else f"{', '.join(weak)}: " + ("medians only" if status == WITHIN_SPREAD
+                                       else f"not {word}"),
+    )  # fmt: skip
+
+
+def _pi_drifts_more(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+    claim = Claim(
+        "C12", "Without steering the PI model drifts more than the baseline",
+        "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (b)", "base_displacement",
+        metric=DRIFT_METRIC,
+    )  # fmt: skip
+    pairs = _drift_pairs(data, figures, pi_weight, False)
+    if any(not len(v) for pair in pairs.values() for v in pair):
+        return missing(claim, "the baseline or the PI model")
+    orders = {a: order(b, p) for a, (b, p) in pairs.items()}
+    label = f"w={weight_label(pi_weight)}"
+    return stands_still(
+        data, _drift_claim(claim, pairs, label, orders, "larger"), [(BASELINE, False)]
+    )
+
+
+def _steered_beats_baseline(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+    claim = Claim(
+        "C13", "With steering the PI model deviates less from the walking direction than the "
+        "baseline", "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (c)",
+        "base_displacement", metric=DRIFT_METRIC,
+    )  # fmt: skip
+    pairs = _drift_pairs(data, figures, pi_weight, True)
+    if any(not len(v) for pair in pairs.values() for v in pair):
+        return missing(claim, "the baseline or the steered PI model")
+    orders = {a: order(p, b) for a, (b, p) in pairs.items()}
+    label = f"w={weight_label(pi_weight)} steered"
+    claim = _drift_claim(claim, pairs, label, orders, "smaller")
+    return stands_still(data, claim, [(data.model(pi_weight), True)])
+
+
+def _pi_reduces_foot_motion(data: SeedData, figures: FiguresParams) -> Claim:
+    low, high = sorted(figures.foot_height_weights)[:1] + sorted(figures.foot_height_weights)[-1:]
+    claim = Claim(
+        "C14", f"The PI loss (w={weight_label(high)}) reduces support-foot motion against "
+        f"w={weight_label(low)}",
+        "Sec. IV-C2, Fig. pi_ablation_foot_z_plot", "foot_heights",
+        metric="position-level contact-foot speed (m/s); skating ratio beside",
+    )  # fmt: skip
+    steering = figures.foot_steering
+    models = [data.model(w) for w in (low, high)]
+    speed = [data.values(m, steering, "contact_foot_speed_mean_position") for m in models]
+    skate = [data.median(m, steering, "skating_ratio") for m in models]
+    if any(not len(v) for v in speed):
+        return missing(claim, f"w={weight_label(low)} and w={weight_label(high)}")
+    status = order(speed[1], speed[0])
+    claim = dataclasses.replace(
+        claim, status=status,
+        ours=f"w={weight_label(low)}: {span(speed[0])}, w={weight_label(high)}: "
+        f"{span(speed[1])}; skating ratio {fmt(skate[0])}, {fmt(skate[1])}",
+        reason={HOLDS: "contact feet move slower in every seed",
+                WITHIN_SPREAD: "median slower, seed ranges overlap"}.get(
+            status, "contact feet do not move slower"),
+    )  # fmt: skip
+    return stands_still(data, claim, [(models[1], steering)])

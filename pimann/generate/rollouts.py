@@ -1,0 +1,133 @@
+"""The rollout stage's runner: every seed of a training output x every command script, with
+and without steering, generated in batches and written in the layout of
+pimann.generate.rollout_layout.
+
+The scripts are the named scenarios of `rollout.scenario_names` and, with
+`rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
+features stage's split (pimann.generate.benchmark_clips), with `rollout.benchmark_train_clips` also
+of a few training clips per motion class.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+from pathlib import Path
+from typing import Any
+
+from pimann.core.atomic import atomic_path
+from pimann.core.errors import PimannError
+from pimann.core.parallel import pool_map
+from pimann.core.params import Params
+from pimann.generate.benchmark_clips import benchmark_scripts
+from pimann.generate.rollout_layout import (
+    MODELS_FILE,
+    RolloutKey,
+    Segment,
+    rollout_path,
+    scenario_names,
+)
+from pimann.learn.model_files import model_seeds
+
+log = logging.getLogger(__name__)
+
+
+def models_record(models_dir: str | Path) -> dict[str, Any]:
+    """What the rollouts' provenance keeps of each seed's meta.json."""
+    record: dict[str, Any] = {}
+    for seed, folder in model_seeds(models_dir).items():
+        meta_path = folder / "meta.json"
+        try:
+            meta = json.loads(meta_path.read_text())
+            record[str(seed)] = {
+                "pi_weight": float(meta["pi_weight"]),
+                "variant": meta["variant"],
+                "best_epoch": meta.get("best_epoch"),
+                "best_test_loss": meta.get("best_test_loss"),
+                "epochs": meta.get("epochs"),
+                "train_samples": meta.get("train_samples"),
+                "clips": len(meta.get("train_clips", [])) + len(meta.get("test_clips", [])),
+            }
+        except KeyError as error:
+            raise PimannError(meta_path, f"a model's metadata lacks {error}") from None
+        except (AttributeError, TypeError, ValueError) as error:  # not JSON, not an object
+            raise PimannError(meta_path, f"not a model's metadata ({error})") from None
+    return record
+
+
+def _generate_seed(
+    job: tuple[Path, list[tuple[str, list[Segment], bool, Path]], Params],
+) -> str | None:
+    """One seed's rollouts, generated together in batches
+    (pimann.generate.generator.generate_files);
+    the error that stopped them (naming the file), or None."""
+    import torch
+
+    from pimann.generate.generator import FileJob, generate_files
+
+    torch.set_num_threads(1)  # one process per core
+    model_dir, files, params = job
+    jobs = [FileJob(*file) for file in files]
+    try:
+        generate_files(model_dir, jobs, params)
+    except PimannError as error:
+        return str(error)
+    return None
+
+
+def rollout_scripts(params: Params) -> dict[str, list[Segment]]:
+    """{scenario: script} the rollout stage runs: the named scenarios of
+    `rollout.scenario_names`, then the benchmark's clips' scripts (`rollout.benchmark_clips`:
+    the test clips', `rollout.benchmark_train_clips`: training clips')."""
+    names = scenario_names(params.rollout)
+    unknown = [name for name in names if name not in params.rollout.scenarios]
+    if unknown:
+        raise PimannError("params.yaml", f"rollout.scenario_names: unknown scenario {unknown[0]!r}")
+    scripts = {name: list(params.rollout.scenarios[name]) for name in names}
+    clips = benchmark_scripts(params)
+    clash = sorted(set(clips) & set(scripts))
+    if clash:
+        raise PimannError("params.yaml", f"scenario {clash[0]!r} is also a clip's script name")
+    scripts.update(clips)
+    return scripts
+
+
+def run_rollouts(
+    models_dir: str | Path, out_dir: str | Path, params: Params, workers: int = 2
+) -> list[Path]:
+    """Every seed of one training output x every script of `rollout_scripts` (the named
+    scenarios and the benchmark clips), with and without steering.
+
+    One job per seed (`workers` processes): its scripts x steering advance together as one
+    batch (pimann.generate.batch_generate). Written into `out_dir` (= results/rollouts/<model>) as a
+    whole, atomically.
+    """
+    models_dir, out_dir = Path(models_dir), Path(out_dir)
+    seeds = model_seeds(models_dir)
+    scripts = rollout_scripts(params)
+    record = {
+        "profile": params.profile,
+        "models_dir": models_dir.name,
+        "seeds": models_record(models_dir),
+    }
+    with atomic_path(out_dir) as tmp:
+        jobs = [
+            (folder, [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)))
+                      for sc, script in scripts.items() for st in (False, True)], params)
+            for seed, folder in seeds.items()
+        ]  # fmt: skip
+        tmp.mkdir()
+        for seed in seeds:
+            (tmp / str(seed)).mkdir()
+        failures = pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name}", "seeds")
+        record["failed"] = {
+            str(seed): error for seed, error in zip(seeds, failures, strict=True) if error
+        }
+        for seed, error in record["failed"].items():  # recorded; the other seeds go on
+            log.warning("rollouts of %s seed %s failed: %s", models_dir.name, seed, error)
+            shutil.rmtree(tmp / seed)  # no half set of a seed's rollouts
+        if len(record["failed"]) == len(seeds):
+            raise PimannError(models_dir, f"every seed failed; first: {failures[0]}")
+        (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
+    return sorted(out_dir.glob("*/*.h5"))

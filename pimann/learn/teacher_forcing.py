@@ -1,0 +1,209 @@
+"""Teacher-forced response per motion class: does a trained model predict the data's velocity?
+
+Fed the data's own inputs, a model's first output sample (the base velocity of the next
+frame, in its base frame: not an input column) should match the data's, and so should its
+legs' joint steps s_i - s_{i-1}. Where it does and a rollout still fails,
+the rollout loop is the cause (how it starts, what it feeds back); where it does not, the
+training is. Run after `dvc repro` (it reads models/ and data/features):
+
+    python -m pimann.learn.teacher_forcing [--models models] [--samples 20000]
+
+prints, per model seed and motion class (pimann.learn.motion_classes of the sample's frame), the
+mean true and predicted forward and lateral base velocity and the least-squares slope of the
+prediction on the truth (1: follows the data; 0: ignores it); and on the samples in single
+support (the data's contact flags) the same for the contact leg's share of the sole's forward
+velocity, (J_SF^B)^-1 J_SF^s sdot along the base's x (pimann.learn.physics_loss), which on a still
+foot cancels the base's forward velocity: L_B charges their sum, so where a model predicts a
+small base velocity this tells whether its legs shrank with it; and the slope of the
+predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's).
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+
+from pimann.core.errors import PimannError
+from pimann.core.params import load_params
+from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import JOINT_NAMES
+from pimann.core.trajectory import iter_collection
+from pimann.learn.dataset import read_dataset
+from pimann.learn.features import REVERSED_SUFFIX, time_reversed
+from pimann.learn.model_files import model_seeds
+from pimann.learn.motion_classes import CLASSES, motion_classes
+from pimann.learn.training_loss import TrainingLoss
+
+# the next frame's base velocity (y_i's window is of frame i + 1: not an input column)
+OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
+LEG_JOINTS = [
+    k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))
+]
+
+
+def sample_classes(collection: Path, clips: list[str], origin: np.ndarray) -> np.ndarray:
+    """(N,) motion class name of each sample's frame (origin: clip index, step); a clip the
+    features added time-reversed (`<name>~reversed`) is classed as played backward."""
+    trajectories = dict(iter_collection(collection))
+    by_name = {name: motion_classes(t) for name, t in trajectories.items()}
+    for name in set(clips) - set(by_name):
+        original = trajectories.get(name.removesuffix(REVERSED_SUFFIX))
+        if name.endswith(REVERSED_SUFFIX) and original is not None:
+            by_name[name] = motion_classes(time_reversed(original))
+    return np.array([CLASSES[by_name[clips[c]][step]] for c, step in origin])
+
+
+def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
+    centred = truth - truth.mean()
+    denominator = float(centred @ centred)
+    return float(centred @ (prediction - prediction.mean())) / denominator if denominator else 0.0
+
+
+def leg_joint_steps(layout, stats, x: np.ndarray, y: np.ndarray, predicted: np.ndarray):
+    """(truth, prediction) (N, legs): the leg joints' step s_i - s_{i-1} of the data's output
+    and of the predicted one from the same input (normalised x, y, predicted; radians)."""
+    xs, ys = layout.x_slices["joints"], layout.y_slices["joints"]
+    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    truth = y[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
+    prediction = predicted[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
+    return truth[:, LEG_JOINTS], prediction[:, LEG_JOINTS]
+
+
+def contact_leg_velocity(
+    loss: TrainingLoss, y: np.ndarray, contacts: np.ndarray | None
+) -> np.ndarray:
+    """(N,) the contact leg's share of its sole's forward velocity (base frame) in the
+    normalised outputs `y`; NaN outside single support or without contact flags."""
+    if contacts is None:
+        return np.full(len(y), np.nan)
+    with torch.no_grad():
+        terms = loss.pi_terms(torch.as_tensor(y, dtype=torch.float32))
+        feet, _ = loss.physics.foot_twists(terms["joints"], terms["joint_velocities"])
+    left = torch.as_tensor(contacts[:, 0])
+    share = torch.where(left, feet[:, 0, 0], feet[:, 1, 0]).numpy()
+    return np.where(contacts.sum(axis=1) == 1, share, np.nan)
+
+
+def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
+    """One row per model seed, split (train subset / test) and motion class."""
+    from pimann.learn.model_files import load_model
+
+    rows = []
+    cache: dict[str, tuple] = {}
+    for seed, folder in model_seeds(models_dir).items():
+        model, layout, stats, meta = load_model(folder)
+        dataset_path = Path(meta["dataset"])
+        if str(dataset_path) not in cache:
+            dataset = read_dataset(dataset_path)
+            take = np.linspace(0, len(dataset.x_train) - 1, min(samples, len(dataset.x_train)))
+            take = take.astype(int)
+            train_contacts = dataset.train_contacts
+            parts = {
+                "train": (dataset.x_train[take], dataset.y_train[take], dataset.train_origin[take],
+                          None if train_contacts is None else train_contacts[take]),
+                "test": (dataset.x_test, dataset.y_test, dataset.test_origin,
+                         dataset.test_contacts),
+            }  # fmt: skip
+            classes = {
+                split: sample_classes(collection, dataset.clips, origin)
+                for split, (_, _, origin, _) in parts.items()
+            }
+            # the data's own leg shares, once per dataset: its stats are the models' own
+            loss = TrainingLoss(dataset.layout, dataset.stats, "predicted", torch.device("cpu"))
+            leg_truths = {
+                split: contact_leg_velocity(loss, y, contacts)
+                for split, (_, y, _, contacts) in parts.items()
+            }
+            cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes, loss, leg_truths)
+        names, parts, classes, loss, leg_truths = cache[str(dataset_path)]
+        columns = [names.index(name) for name in OUTPUTS]
+        for split, (x, y, _, contacts) in parts.items():
+            with torch.no_grad():
+                predicted = model(torch.as_tensor(x, dtype=torch.float32)).numpy()
+            truth = y[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
+            prediction = predicted[:, columns] * stats.y_std[columns] + stats.y_mean[columns]
+            leg_truth = leg_truths[split]
+            leg_prediction = contact_leg_velocity(loss, predicted, contacts)
+            step_truth, step_prediction = leg_joint_steps(layout, stats, x, y, predicted)
+            for name in CLASSES:
+                mask = classes[split] == name
+                if mask.sum() < 50:
+                    continue
+                single = mask & np.isfinite(leg_truth)
+                leg = {"leg_true": np.nan, "leg_pred": np.nan, "leg_slope": np.nan}
+                if single.sum() >= 50:
+                    true_leg, predicted_leg = leg_truth[single], leg_prediction[single]
+                    leg = {
+                        "leg_true": true_leg.mean(), "leg_pred": predicted_leg.mean(),
+                        "leg_slope": _slope(true_leg, predicted_leg),
+                    }  # fmt: skip
+                rows.append({
+                    "model": models_dir.name, "seed": seed, "split": split, "class": name,
+                    "samples": int(mask.sum()),
+                    "vx_true": truth[mask, 0].mean(), "vx_pred": prediction[mask, 0].mean(),
+                    "vy_true": truth[mask, 1].mean(), "vy_pred": prediction[mask, 1].mean(),
+                    "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
+                    "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]), **leg,
+                    "leg_step_slope": _slope(step_truth[mask].ravel(),
+                                             step_prediction[mask].ravel()),
+                })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def model_folders(root: Path) -> list[Path]:
+    """The training outputs under `root`: itself when it is one (models/w10, its seeds'
+    folders inside), else its sub-folders that are (models/)."""
+    if any(root.glob("*/meta.json")):
+        return [root]
+    folders = sorted(p for p in root.iterdir() if p.is_dir() and any(p.glob("*/meta.json")))
+    if not folders:
+        raise PimannError(root, "no trained models here (models/ or one of its folders)")
+    return folders
+
+
+def add_models_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models",
+                        help="models/ or one training output in it, e.g. models/w10")  # fmt: skip
+
+
+def table_over_models(
+    tool: str, models: Path, table_of: Callable[[list[Path]], pd.DataFrame]
+) -> pd.DataFrame | None:
+    """`table_of` the training outputs under `models` (`model_folders`); None after the one
+    line on stderr that names the bad input."""
+    try:
+        if not models.is_dir():
+            raise PimannError(models, "not a folder")
+        return table_of(model_folders(models))
+    except PimannError as error:
+        print(f"{tool}: {error}", file=sys.stderr)
+        return None
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_models_argument(parser)
+    parser.add_argument("--samples", type=int, default=20000, help="training samples used")
+    args = parser.parse_args(argv)
+
+    def responses(folders: list[Path]) -> pd.DataFrame:
+        collection = REPO_ROOT / load_params().features.input
+        frames = [class_response(folder, collection, args.samples) for folder in folders]
+        return pd.concat(frames, ignore_index=True)
+
+    table = table_over_models("teacher_forcing", args.models, responses)
+    if table is None:
+        return 2
+    with pd.option_context("display.width", 160, "display.max_rows", 500):
+        print(table.round(2).to_string(index=False))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,421 @@
+"""Training of the (physics-informed) MANN: L = L_D + w L_B (SPEC 5, 6; Eq. overall_loss).
+
+The seeds of one PI weight train together as vectorised ensembles (`MANN.from_seeds`), split
+over `train.workers` single-threaded processes on the CPU: the members never mix (their
+losses are summed, AdamW acts elementwise), and each member draws its data order, its
+initial weights and its dropout masks from its own seed, so member k is the model seed k
+would give alone whatever group it trains in. The dropout and order seeds are fixed per
+epoch, so a run resumed from its per-epoch checkpoint continues exactly as an uninterrupted
+one.
+
+The loss is `pimann.learn.training_loss`, the per-epoch schedule, order and seeds
+`pimann.learn.epochs`, the model folders `pimann.learn.model_files`.
+
+Optimiser as in the authors' code: AdamW, lr 1e-4 and weight decay 0.0025 / sqrt(batches
+per epoch x Te), both annealed per epoch by cosine warm restarts (Te = 10, Tmult = 2). The
+epoch with the lowest test loss is kept, per member.
+
+`train.precision` bfloat16 runs the network's forward and backward products under
+`torch.autocast` (about 6x the float32 matmul rate on a CPU with AVX512-BF16): the weights,
+the optimiser state, L_D, L_B's kinematics and the test loss stay float32, and the dropout
+masks are drawn in float32, so both precisions draw the same masks from the same seeds.
+
+Over 400 lines: one training loop (ensembles, workers, checkpoints, precision) that reads as
+a unit; its loss, epochs and model files are already their own modules.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from pimann.core.atomic import atomic_path
+from pimann.core.errors import PimannError
+from pimann.core.parallel import cpu_workers, pool_map, training_threads
+from pimann.core.params import Params, as_dict
+from pimann.core.progress import Progress
+from pimann.core.stage_times import note
+from pimann.learn.dataset import read_dataset
+from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
+from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
+from pimann.learn.mann import MANN
+from pimann.learn.model_files import save_model
+from pimann.learn.rollout_states import training_states
+from pimann.learn.training_loss import TrainingLoss
+
+log = logging.getLogger(__name__)
+
+CHECKPOINT_FILE = "checkpoint.pt"
+LOSS_COLUMNS = ("train_loss", "train_mse", "train_pi", "test_loss", "test_mse", "test_pi")
+
+
+def pick_device(setting: str = "auto") -> torch.device:
+    """`auto`: CUDA when present, else CPU."""
+    if setting == "cuda" and not torch.cuda.is_available():
+        raise PimannError(None, "train.device is cuda but no CUDA device is available")
+    if setting == "auto":
+        setting = "cuda" if torch.cuda.is_available() else "cpu"
+    return torch.device(setting)
+
+
+def cpu_has_bf16(cpuinfo: Path = Path("/proc/cpuinfo")) -> bool:
+    """True where the CPU's flags name AVX512-BF16 or AMX-BF16 (where bf16 products are fast:
+    elsewhere torch emulates them, slower than float32)."""
+    try:
+        flags = set(cpuinfo.read_text().split())
+    except OSError:
+        return False
+    return bool(flags & {"avx512_bf16", "amx_bf16"})
+
+
+def pick_precision(setting: str, device: torch.device) -> str:
+    """train.precision resolved: `auto` is bfloat16 on a bf16-capable CPU or CUDA device."""
+    if setting != "auto":
+        return setting
+    if device.type == "cuda":
+        return "bfloat16" if torch.cuda.is_bf16_supported() else "float32"
+    return "bfloat16" if device.type == "cpu" and cpu_has_bf16() else "float32"
+
+
+def autocast(device: torch.device, precision: str) -> contextlib.AbstractContextManager:
+    """The network's products in bfloat16 (precision `bfloat16`), else a no-op."""
+    if precision == "float32":
+        return contextlib.nullcontext()
+    return torch.autocast(device.type, dtype=torch.bfloat16)
+
+
+def seed_groups(seeds: list[int], workers: int) -> list[list[int]]:
+    """The seeds split into `workers` contiguous groups of near-equal size, one per process."""
+    return [list(map(int, group)) for group in np.array_split(np.array(seeds), workers)]
+
+
+@dataclasses.dataclass
+class _State:
+    """Everything a resumed run needs; saved after every epoch."""
+
+    epoch: int  # epochs completed
+    model: dict
+    optimizer: dict
+    best: dict  # per-parameter tensors holding each member's best epoch
+    best_loss: list[float]
+    best_epoch: list[int]
+    history: list[list[dict]]  # per member, one row per epoch
+
+
+def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params: Params) -> str:
+    """What a checkpoint must match to be resumed (the epoch count may grow)."""
+    train = {
+        **as_dict(params.train),
+        "epochs": 0,
+        "eval_batch_size": 0,
+        "device": "auto",
+        "threads": "auto",
+        "workers": 0,
+    }  # what does not change the result
+    digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
+    blob = json.dumps([digest, pi_weight, seeds, as_dict(params.model), train], sort_keys=True)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+@contextlib.contextmanager
+def _deterministic():
+    """torch's deterministic algorithms for the run, the caller's setting restored after."""
+    before = torch.are_deterministic_algorithms_enabled()
+    warn = torch.is_deterministic_algorithms_warn_only_enabled()
+    torch.use_deterministic_algorithms(True, warn_only=True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(before, warn_only=warn)
+
+
+def train_models(
+    dataset_path: str | Path,
+    out_dir: str | Path,
+    pi_weight: float,
+    seeds: list[int],
+    params: Params,
+    device: torch.device | str | None = None,
+    checkpoint_dir: str | Path | None = None,
+    plots_dir: str | Path | None = None,
+    stop_after: int | None = None,
+) -> dict[int, dict]:
+    """Train one model per seed for `pi_weight`; write out_dir/<seed>/ and the loss CSVs.
+
+    Resumes from `checkpoint_dir` (default: out_dir's sibling `.checkpoints/<name>`) when a
+    checkpoint of the same data and parameters is there (it is removed once the models are
+    written). `stop_after` stops after that many epochs in total without writing the models (a
+    stand-in for an interruption). Returns each seed's meta data.
+    """
+    with _deterministic():
+        return _train(
+            Path(dataset_path), Path(out_dir), pi_weight, list(seeds), params, device,
+            checkpoint_dir, plots_dir, stop_after,
+        )  # fmt: skip
+
+
+def _train(
+    dataset_path: Path,
+    out_dir: Path,
+    pi_weight: float,
+    seeds: list[int],
+    params: Params,
+    device: torch.device | str | None,
+    checkpoint_dir: str | Path | None,
+    plots_dir: str | Path | None,
+    stop_after: int | None,
+) -> dict[int, dict]:
+    """train_models' body: the seeds split into `train.workers` groups, then the outputs."""
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise PimannError(None, f"train.seeds must be distinct and non-empty, not {seeds}")
+    config = params.train
+    device = pick_device(config.device) if device is None else torch.device(device)
+    checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
+    data = read_dataset(dataset_path)  # read here too: bad data fails before any worker starts
+    if config.pi_support == "data_contacts" and pi_weight != 0.0 and data.train_contacts is None:
+        raise PimannError(
+            dataset_path, "has no contact flags, which train.pi_support data_contacts needs"
+        )
+    precision = pick_precision(config.precision, device)
+    threads = training_threads(config.threads)
+    workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds), threads))
+    groups = seed_groups(seeds, workers)
+    note("train_precision", precision)  # in the stage-time record
+    note("train_threads", threads)
+    # one progress for the stage: the first group's (the groups keep pace with each other)
+    progress = f"train {out_dir.name} seeds {groups[0]}"
+    jobs = [
+        _GroupJob(dataset_path, group, pi_weight, params, str(device), checkpoint_dir,
+                  stop_after, max(1, threads // workers), precision,
+                  progress if k == 0 else None)
+        for k, group in enumerate(groups)
+    ]  # fmt: skip
+    n = len(data.x_train)
+    if config.max_train_samples is not None:
+        n = min(n, config.max_train_samples)
+    log.info(
+        "%s (w=%g, %s data, %d of %d training samples, %s): seeds %s in %d process(es) "
+        "of %d thread(s)", out_dir.name, pi_weight, data.layout.variant, n, len(data.x_train),
+        precision, groups, workers, max(1, threads // workers),
+    )  # fmt: skip
+    results = pool_map(_train_group, jobs, workers, None)
+    if any(result is None for result in results):
+        return {}  # stopped early (stop_after)
+    members = {seed: member for result in results for seed, member in result.items()}
+
+    metas = {}
+    with atomic_path(out_dir) as tmp:
+        for seed in seeds:
+            member = members[seed]
+            meta = {
+                "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
+                "best_epoch": member["best_epoch"], "best_test_loss": member["best_loss"],
+                "epochs": config.epochs, "precision": precision, "train_samples": n,
+                "test_samples": len(data.x_test),
+                "dataset": str(dataset_path), "train_clips": data.train_clips,
+                "test_clips": data.test_clips, "standing": data.standing,
+                "params": {"model": as_dict(params.model), "train": as_dict(config)},
+            }  # fmt: skip
+            model = MANN(data.layout.input_dim, data.layout.output_dim, params.model, seeds=[seed])
+            model.load_state_dict(member["state_dict"])
+            save_model(tmp / str(seed), model, data.layout, data.stats, meta)
+            metas[seed] = meta
+    if plots_dir is not None:
+        with atomic_path(plots_dir) as tmp:
+            tmp.mkdir()
+            for seed in seeds:
+                write_loss_csv(tmp / f"seed{seed}.csv", members[seed]["history"])
+    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
+    return metas
+
+
+@dataclasses.dataclass(frozen=True)
+class _GroupJob:
+    """What one training process needs (picklable, for spawned workers)."""
+
+    dataset_path: Path
+    seeds: list[int]
+    pi_weight: float
+    params: Params
+    device: str
+    checkpoint_dir: Path
+    stop_after: int | None
+    threads: int  # torch threads of the group's process
+    precision: str  # float32 | bfloat16 (resolved)
+    progress: str | None  # the label of the group that reports the stage's progress
+
+
+def _train_group(job: _GroupJob) -> dict[int, dict] | None:
+    """Train the ensemble of `job.seeds`; per seed its best weights, epoch, loss and history.
+
+    None when stopped by `stop_after` before the last epoch (the checkpoint is kept).
+    """
+    before = torch.get_num_threads()
+    torch.set_num_threads(job.threads)
+    try:
+        with _deterministic():
+            return _train_ensemble(job)
+    finally:
+        torch.set_num_threads(before)
+
+
+def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
+    """_train_group's body (see there)."""
+    config, seeds, pi_weight = job.params.train, job.seeds, job.pi_weight
+    device = torch.device(job.device)
+    if device.type == "cuda":
+        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
+
+    data = read_dataset(job.dataset_path)
+    keep = np.arange(len(data.x_train))
+    if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
+        keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
+        keep = keep.astype(np.int64)
+    states, test_rollouts = training_states(
+        config, job.params.rollout.command_blend_tau, data, keep, job.seeds, device
+    )  # rolled out from every training sample
+    if len(keep) < len(data.x_train):
+        data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
+        if data.train_contacts is not None:
+            data.train_contacts = data.train_contacts[keep]
+        log.debug("training on %d evenly spaced of the training samples", len(keep))
+    x_train, y_train, x_test, y_test = (
+        torch.as_tensor(a, dtype=torch.float32, device=device)
+        for a in (data.x_train, data.y_train, data.x_test, data.y_test)
+    )
+    c_train = c_test = None  # the data's contacts, loaded only where L_B uses them
+    if config.pi_support == "data_contacts":
+        c_train, c_test = (
+            None if c is None else torch.as_tensor(c, dtype=torch.bool, device=device)
+            for c in (data.train_contacts, data.test_contacts)
+        )
+    n, batch = len(x_train), config.batch_size
+    batches = math.ceil(n / batch)
+    weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)
+    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, job.params.model, seeds)
+    model.to(device).train()
+    # fused: one kernel over every parameter, 3.6x faster than the default per-tensor loop on
+    # the CPU (4.2 vs 15.1 ms a step for a 5-member ensemble), the same update
+    optimizer = torch.optim.AdamW(
+        model.parameters(), lr=config.learning_rate, weight_decay=weight_decay, fused=True
+    )
+    loss_fn = TrainingLoss(
+        data.layout, data.stats, config.pi_configuration, device, config.pi_support,
+        config.pi_gradient, config.consistency_weight,
+    )  # fmt: skip
+    fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
+    members = len(seeds)
+    state = _State(
+        0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
+        [math.inf] * members, [-1] * members, [[] for _ in seeds],
+    )  # fmt: skip
+    if checkpoint.is_file():
+        saved = torch.load(checkpoint, map_location=device, weights_only=True)
+        if saved.get("fingerprint") == fingerprint and saved["epoch"] <= config.epochs:
+            state = _State(**{f.name: saved[f.name] for f in dataclasses.fields(_State)})
+            model.load_state_dict(state.model)
+            optimizer.load_state_dict(state.optimizer)
+            log.info("resuming seeds %s from epoch %d", seeds, state.epoch)
+        else:
+            log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
+
+    test_loss = HeldOutLoss(loss_fn, x_test, y_test, c_test, config.eval_batch_size, test_rollouts,
+                         config.rollout_states)  # fmt: skip
+    with_pi_train = pi_weight != 0.0
+    noise = InputNoise(config.input_noise, data.layout.fed_back_columns(), seeds, device)
+    last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
+    progress = Progress(
+        config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
+        enabled=job.progress is not None,
+    )  # fmt: skip
+    for epoch in range(state.epoch, last):
+        factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
+        for group in optimizer.param_groups:
+            group["lr"] = config.learning_rate * factor
+            group["weight_decay"] = weight_decay * factor
+        model.seed_dropout([epoch_seed(seed, epoch, "dropout") for seed in seeds])
+        noise.start_epoch(epoch)
+        states.start_epoch(model, epoch)
+        order = torch.as_tensor(
+            np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
+        )  # (E, N)
+        totals = torch.zeros(2, members, device=device)
+        for start in range(0, n, batch):
+            index = order[:, start : start + batch]
+            contacts = None if c_train is None else c_train[index]
+            x = noise(states(x_train[index], index))
+            clean = None
+            with autocast(device, job.precision):
+                if with_pi_train and not config.pi_dropout:
+                    prediction, clean = model.forward_with_clean(x)
+                else:
+                    prediction = model(x)
+            prediction = prediction.float()  # the losses in float32
+            clean = None if clean is None else clean.float()
+            mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, clean)
+            optimizer.zero_grad(set_to_none=True)
+            (mse + pi_weight * pi).sum().backward()
+            optimizer.step()
+            totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
+        train_mse, train_pi = (totals / n).tolist()
+        test_mse, test_pi = (t.tolist() for t in test_loss(model))
+        if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
+            every = max(1, n // 4096)
+            sample = (x_train[::every], y_train[::every])
+            sample += (None if c_train is None else c_train[::every],)
+            train_pi = batched_loss(model, loss_fn, *sample, config.eval_batch_size)[1].tolist()
+        for k in range(members):
+            row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
+            row.update(
+                train_loss=train_mse[k] + pi_weight * train_pi[k], train_mse=train_mse[k],
+                train_pi=train_pi[k], test_loss=test_mse[k] + pi_weight * test_pi[k],
+                test_mse=test_mse[k], test_pi=test_pi[k],
+            )  # fmt: skip
+            state.history[k].append(row)
+            if row["test_loss"] < state.best_loss[k]:
+                state.best_loss[k], state.best_epoch[k] = row["test_loss"], epoch + 1
+                for name, value in model.state_dict().items():
+                    state.best[name][k] = value[k].detach()
+        mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
+        progress.update(postfix=f"train {mean['train_loss']:.4f}, test {mean['test_loss']:.4f}")
+        log.debug(
+            "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, "
+            "pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
+            *(mean[c] for c in LOSS_COLUMNS),
+        )  # fmt: skip
+        state.epoch = epoch + 1
+        state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
+        with atomic_path(checkpoint) as tmp:
+            torch.save({**dataclasses.asdict(state), "fingerprint": fingerprint}, tmp)
+    progress.close()
+    if state.epoch < config.epochs:
+        return None
+    model.load_state_dict(state.best)
+    return {
+        seed: {
+            "state_dict": {k: v.cpu() for k, v in model.member(i).state_dict().items()},
+            "best_epoch": state.best_epoch[i],
+            "best_loss": state.best_loss[i],
+            "history": state.history[i],
+        }
+        for i, seed in enumerate(seeds)
+    }
+
+
+def write_loss_csv(path: Path, history: list[dict]) -> None:
+    with path.open("w", newline="") as file:
+        writer = csv.DictWriter(file, fieldnames=["epoch", *LOSS_COLUMNS, "lr"])
+        writer.writeheader()
+        writer.writerows(history)

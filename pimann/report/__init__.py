@@ -1,0 +1,1 @@
+"""The report: paper figures, the report page and its key metrics."""
