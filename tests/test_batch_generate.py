@@ -49,7 +49,10 @@ def assert_same_rollout(alone, row, tolerance: float = 1e-9) -> None:
     a, b = alone.trajectory, row.trajectory
     assert len(a) == len(b) and a.attrs == b.attrs and a.source == b.source
     for name in ("base_position", "base_quaternion_xyzw", "joint_positions", "joint_velocities"):
-        np.testing.assert_allclose(getattr(b, name), getattr(a, name), rtol=0, atol=tolerance)
+        # relative beyond 1: a fitted network's joint velocities reach hundreds of rad/s
+        np.testing.assert_allclose(
+            getattr(b, name), getattr(a, name), rtol=tolerance, atol=tolerance
+        )
     np.testing.assert_array_equal(b.contacts, a.contacts)
     np.testing.assert_allclose(row.goals, alone.goals, rtol=0, atol=tolerance)  # NaN at 0
     np.testing.assert_array_equal(row.stopped, alone.stopped)
@@ -127,20 +130,24 @@ def trained(robot, params) -> tuple[MANN, Normalisation]:
 
 def test_trained_mann_rows_equal_their_rollouts_alone(robot, params, trained):
     """Alone, the network runs in numpy (`NumpyMANN`), in a batch in torch: rows equal their
-    rollouts alone to rounding over 1.7 s (contacts, stops and support feet identical). A
-    fitted network's rollout is chaotic (which foot lifts first at a start is a near tie), and
-    BLAS rounding that depends on the batch size (1e-16 in float64, 1e-7 in float32) grows
-    fast: float32's reaches millimetres (rad) within 1-1.5 s on this fitted network, float64's
-    2e-7 by 3 s. So float64 here; float32 equality is per call (`test_numpy_mann_equals_forward`)
-    and the closed-form gait above checks long rollouts to 1e-9."""
+    rollouts alone to rounding (contacts, stops and support feet identical). A fitted network's
+    rollout is chaotic (which foot lifts first at a start is a near tie), and BLAS rounding
+    that depends on the batch size (1e-16 in float64, 1e-7 in float32) grows fast: float32's
+    reaches millimetres (rad) within 1-1.5 s on this fitted network; float64's stays under
+    1e-10 over walks of at most 0.9 s (with the stands around them) but passes 1e-9 within
+    1.5 s on some machines' BLAS. So float64 and short walks. The network, fitted to one 7.5 s
+    clip, leaves the joint limits and reaches joint velocities of 1e3 rad/s in its rollouts:
+    the comparison is relative where values exceed 1. float32 equality is per call
+    (`test_numpy_mann_equals_forward`) and the closed-form gait above checks long rollouts
+    to 1e-9."""
     torch.set_num_threads(1)
     model, stats = trained
     model = MANN.member(model, 0).to(torch.float64).eval()
     scripts = [
         [S(0.3, True), M(0.8, 0.5, 0.0, 0.0), S(0.6, True)],
-        [M(1.5, 0.5, 0.0, 0.0)],
+        [M(0.9, 0.5, 0.0, 0.0)],
         [M(0.8, 0.5, 0.0, 0.0), S(0.6, True)],
-        [S(0.5, True), M(1.0, 0.4, 0.0, 0.0)],
+        [S(0.5, True), M(0.7, 0.4, 0.0, 0.0)],
     ]
     rows = batch_against_alone(model, stats, params, robot, scripts, tolerance=1e-9)
     for row in (rows[0], rows[4]):  # walks at 16, stops during the 'stand'

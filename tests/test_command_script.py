@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pimann.generate.command_script import Command, ScriptSteps, scenario_steps
 from pimann.core.errors import PimannError
 from pimann.core.params import MotionSegment, StandSegment
+from pimann.generate.command_script import Command, ScriptSteps, scenario_steps
 
 RATE = 50.0
 

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from pimann.core.params import load_params
 from pimann.evaluate.figure_style import (
     FORMATS,
     footer,
@@ -16,7 +17,6 @@ from pimann.evaluate.figure_style import (
     style,
     weight_colours,
 )
-from pimann.core.params import load_params
 
 PROVENANCE = {"profile": "quick", "epochs": 70, "clips": 71, "seeds": [0, 1],
               "scenario": "forward", "other": "not recorded"}  # fmt: skip

@@ -8,8 +8,9 @@ import pinocchio as pin
 import pytest
 from scipy.spatial.transform import Rotation
 
-from pimann.mocap.human_motion import HumanMotion
 from pimann.core.params import load_params
+from pimann.core.robot import SEGMENTS
+from pimann.mocap.human_motion import HumanMotion
 from pimann.retarget.targets import (
     ARM_MARGIN,
     abduct_arms,
@@ -19,7 +20,6 @@ from pimann.retarget.targets import (
     segment_targets,
     spread_legs,
 )
-from pimann.core.robot import SEGMENTS
 
 T = 7
 
