@@ -32,8 +32,13 @@ def main(argv: list[str] | None = None) -> None:
     metrics, report = write_report(
         REPO_ROOT / args.results, REPO_ROOT / args.figures, load_params()
     )
-    # README.md's results block (tracked by git, so a side effect, not a DVC out)
-    write_readme_results(REPO_ROOT / "README.md", json.loads(metrics.read_text()))
+    # README.md's results block (tracked by git, so a side effect, not a DVC out); a copy of
+    # the pipeline without the README (a worker's clone of the stages) has none to rewrite
+    readme = REPO_ROOT / "README.md"
+    if readme.exists():
+        write_readme_results(readme, json.loads(metrics.read_text()))
+    else:
+        log.warning("no %s: its results block is not rewritten", readme)
     log.info("%s, %s (%.1f MB) in %.1f s", metrics, report, report.stat().st_size / 1e6,
              time.perf_counter() - started)  # fmt: skip
 

@@ -180,7 +180,7 @@ def roll(model, scenario, params, steering, robot, stats=IDENTITY, layout=LAYOUT
         rollout_params,
         steering,
         robot,
-        contact_params=params.evaluate,
+        contact_params=params.contacts,
     )
 
 

@@ -68,7 +68,7 @@ def test_saved_files_carry_the_provenance_and_appear_atomically(figures, tmp_pat
     assert [p.name for p in paths] == [f"line.{fmt}" for fmt in FORMATS]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["line.pdf", "line.png"]
     with Image.open(tmp_path / "line.png") as png:
-        assert png.text["Title"] == "line" and png.text["Software"] == "pimann.figures"
+        assert png.text["Title"] == "line" and png.text["Software"] == "pimann.report.figures"
         described = png.text["Description"]
         assert '"epochs": 70' in described and '"profile": "quick"' in described
         assert "not recorded" not in described  # only the five provenance keys
