@@ -1,4 +1,4 @@
-"""Training-step throughput: plain MSE against MSE + physics-informed loss (SPEC 5, 6).
+"""Training-step throughput: plain MSE against MSE + physics-informed loss (paper Sec. III-B).
 
 Random data of the study's sizes (input 130, output 100), one AdamW step per batch, for a
 single MANN and a 5-member ensemble, at batch 32 and 256. Prints samples/s (model-samples:
@@ -43,7 +43,7 @@ from pimann.learn.train import autocast, cpu_has_bf16, seed_groups
 
 INPUT_DIM, OUTPUT_DIM = 130, 100
 # output layout used here only to feed the PI loss: 7 future base linear and 7 angular
-# velocities (the first is the current one), s, sdot, p, psi (SPEC 4)
+# velocities (the first is the current one), s, sdot, p, psi (paper Sec. III-A)
 V, W, S, SDOT = slice(0, 3), slice(21, 24), slice(42, 68), slice(68, 94)
 P, PSI = slice(94, 97), slice(97, 100)
 # the paper's size: 150 epochs over the whole walking set (720 clips + mirrors, minus the

@@ -1,7 +1,7 @@
 """DVC stage `retarget`: every source's takes, cut into clips, (and their mirrors) onto ergoCub.
 
 Writes data/retargeted/walking.h5 (one group per clip, `<clip>` and `<clip>_mirror`) and
-results/retarget_quality.json (SPEC 3.1 quality figures, per-source counts, the profile and
+results/retarget_quality.json (quality figures, per-source counts, the profile and
 params used).
 """
 
@@ -57,7 +57,7 @@ def main(argv: list[str] | None = None) -> None:
         trajectories.append((name, trajectory))
         if params.data.mirror:
             # mirror the robot trajectory in joint space, not the person: exact for
-            # ergoCub (SPEC 2) and half the cost of retargeting the mirrored motion
+            # ergoCub and half the cost of retargeting the mirrored motion
             trajectories.append((f"{name}_mirror", mirror_trajectory(trajectory)))
     write_collection(OUTPUT, trajectories)
     quality = summarize([m for _, _, m, _ in clips], sum(s for *_, s in clips))

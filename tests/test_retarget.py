@@ -104,7 +104,7 @@ def test_retarget_keeps_the_stance_foot_still(short_clip, params):
         resample(short_clip, params.retarget.rate_hz), trajectory, params.retarget
     )
     quality = summarize([measures])
-    # planted soles stay put (SPEC 3.1 asks < 0.02 and < 0.05 m/s)
+    # planted soles stay put (the target is < 0.02 and < 0.05 m/s)
     assert quality["stance_foot_speed_m_s"]["median"] < 0.002
     assert quality["stance_foot_speed_m_s"]["p95"] < 0.01
     assert quality["stance_corner_speed_m_s"]["p95"] < 0.01
@@ -182,7 +182,7 @@ def test_a_pivot_turn_steps_instead_of_twisting_the_legs(params):
 def test_a_walk_keeps_the_legs_close_to_the_persons(params):
     """The whole dataset-1 normal walk: planted soles, vertical lifts and a mid-swing that
     follows the person's leg relative to the base keep the thighs' p95 error under 21 deg
-    (23.8 with swings planned in the world alone; SPEC 3.1 asks 15)."""
+    (23.8 with swings planned in the world alone; the target is 15)."""
     motion = read_take(take_of(mocap_dir() / "bandai-namco/dataset" / REAL_CLIP, params.data))
     trajectory = retarget_motion(motion, params.retarget)
     measures = frame_measures(

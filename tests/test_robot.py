@@ -10,7 +10,7 @@ from builders import random_configuration
 from pimann.core.errors import PimannError
 from pimann.core.robot import JOINT_NAMES, SEGMENTS, STANDING_JOINTS, load_robot
 
-SPEC_ORDER = (
+URDF_ORDER = (
     "l_hip_pitch l_hip_roll l_hip_yaw l_knee l_ankle_pitch l_ankle_roll "
     "r_hip_pitch r_hip_roll r_hip_yaw r_knee r_ankle_pitch r_ankle_roll "
     "torso_pitch torso_roll torso_yaw neck_pitch neck_roll neck_yaw "
@@ -20,10 +20,10 @@ SPEC_ORDER = (
 
 
 def test_joint_order_is_spec(robot):
-    assert list(JOINT_NAMES) == SPEC_ORDER
+    assert list(JOINT_NAMES) == URDF_ORDER
     assert robot.model.nq == 7 + 26 and robot.model.nv == 6 + 26
     # the study's order maps by name onto pinocchio's joints
-    for k, name in enumerate(SPEC_ORDER):
+    for k, name in enumerate(URDF_ORDER):
         joint = robot.model.joints[robot.model.getJointId(name)]
         assert robot.q_index[k] == joint.idx_q and robot.v_index[k] == joint.idx_v
 

@@ -192,7 +192,7 @@ def test_bandai_namco_reads_and_calibrates():
     motion = read_bvh(mocap_dir() / BANDAI)
     assert motion.n_frames == 195 and motion.rate_hz == pytest.approx(30.0, rel=1e-4)
     for side in ("Left", "Right"):
-        assert knee_off_axis(motion, side) < 1.0  # SPEC 3.1: ~0.5 deg
+        assert knee_off_axis(motion, side) < 1.0  # the target: ~0.5 deg
         assert abs(ankle_pitch(motion, side)) < 6.0
     assert tilt(motion, "T8").mean() < 4.0 and tilt(motion, "Pelvis").mean() < 5.0
     assert heading_along_velocity(motion) > 0.95

@@ -1,6 +1,6 @@
 """Foot contact on generated trajectories: a Schmitt trigger on each sole's lowest corner.
 
-Generated trajectories carry no contact forces, so contact is inferred from geometry (SPEC 1):
+Generated trajectories carry no contact forces, so contact is inferred from geometry:
 the lowest of the four sole corners (`SOLE_CORNERS`, in the sole frame) is compared with an
 on and an off height, and a switch happens only once its condition has held for
 `switch_time` (params.yaml `contacts`), so a foot grazing the threshold does not chatter. The same

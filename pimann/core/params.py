@@ -132,7 +132,7 @@ class RetargetParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class WindowParams:
-    """Sample times of the base-velocity windows, in seconds from step i (SPEC 4)."""
+    """Sample times of the base-velocity windows, in seconds from step i (paper Sec. III-A)."""
 
     input_s: list[WindowTime]  # the input window around step i (12 samples)
     output_s: list[WindowTime]  # the predicted future window from step i (7 samples)
@@ -140,7 +140,7 @@ class WindowParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class FeaturesParams:
-    """features: windows, split, normalisation (SPEC 4)."""
+    """features: windows, split, normalisation (paper Sec. III-A)."""
 
     input: Str  # the retargeted collection, relative to the repository
     output_dir: Str  # one <variant>.h5 per variant
@@ -171,7 +171,7 @@ class ModelParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class TrainParams:
-    """train: optimiser, epochs, PI weights, seeds (SPEC 5, 6)."""
+    """train: optimiser, epochs, PI weights, seeds (paper Sec. III-B)."""
 
     pi_weights: list[NonNegative]  # the DVC matrix: one ensemble of `seeds` per weight
     seeds: list[NonNegativeInt]
@@ -302,7 +302,8 @@ class SimulateRun:
 
 @dataclass(frozen=True, config=CONFIG)
 class MpcParams:
-    """simulate.mpc: the online centroidal MPC with step adjustment (SPEC 9; the authors' values).
+    """simulate.mpc: the online centroidal MPC with step adjustment (Sec. II-C;
+    the authors' values).
 
     Mass-normalised: forces per unit mass, angular momentum per unit mass.
     """
@@ -371,7 +372,7 @@ class PushParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class SimulateParams:
-    """simulate: MuJoCo model, footsteps, DCM/ZMP adjustment, whole-body QP IK (SPEC 9)."""
+    """simulate: MuJoCo model, footsteps, DCM/ZMP adjustment, whole-body QP IK (paper Sec. II-C)."""
 
     timestep: Positive  # s, MuJoCo step
     control_rate_hz: Positive  # IK + feedback rate

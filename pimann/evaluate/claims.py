@@ -1,4 +1,4 @@
-"""The paper's claims (Sec. IV, SPEC 8) against our metrics: one row each in results/claims.md.
+"""The paper's claims (Sec. IV) against our metrics: one row each in results/claims.md.
 
 Every claim names its metric: the velocity-level sliding RMSE (the authors';
 pimann.evaluate.metrics),
@@ -60,7 +60,7 @@ def evaluate_claims(
     representation: str = "local_world_aligned",
     pi_gradient: str = "both",
 ) -> list[Claim]:
-    """Each claim of the paper's Sec. IV (SPEC 8) against our metrics, by the `RULES`.
+    """Each claim of the paper's Sec. IV against our metrics, by the `RULES`.
 
     `pi_weight`: evaluate.pi_weight, the featured PI model (drift and steering claims);
     `representation`: evaluate.foot_velocity_frame, the linear part of the sliding columns.

@@ -8,7 +8,7 @@ generated trajectories is applied here, with the same functions and contact rule
 - Motion classes, per frame, and starts and stops (pimann.learn.motion_classes: the base's planar
   velocity in the heading frame and its yaw rate over a centred `WINDOW_S` window; transitions
   between standing and moving whose both states last `MIN_STATE_S`). Minutes are given for
-  the original clips and with their mirrors; the authors' composition (SPEC 8.1) is
+  the original clips and with their mirrors; the authors' composition (docs/metrics.md) is
   pre-mirror and label-based, so the `content` labels' minutes are given beside ours where
   clips have them.
 - Support-foot sliding (pimann.evaluate.metrics' velocity level, the joints' differences moving the
@@ -71,7 +71,7 @@ from pimann.learn.motion_classes import (
 MIN_CLASS_FRAMES = 500  # per-class foot metrics only over at least 10 s at 50 Hz
 PAPER_FRAMES = 500  # the paper's test: 500 frames (10 s at 50 Hz)
 GLIDE_HEIGHT = 0.005  # m, a sole corner this close to the floor is down
-# m, a sole corner this far under the floor is in it (SPEC 3.1's target): the retargeting's
+# m, a sole corner this far under the floor is in it (the retargeting's target): the retargeting's
 # quality check's -FLOOR_TOLERANCE, not imported from pimann.retarget.quality because that
 # would load the whole retargeting into this stage (tests/test_data_report.py ties the two)
 BELOW_FLOOR = 0.005
@@ -83,7 +83,7 @@ ALL = "all"  # the source of clips without a `dataset` attribute
 TOTAL = "total"
 CORNER_COLUMNS = tuple(f"glide_{f}{c}" for f in "lr" for c in range(len(SOLE_CORNERS)))
 
-# SPEC 8.1: the authors' training data, label-based minutes before mirroring
+# docs/data.md: the authors' training data, label-based minutes before mirroring
 AUTHORS_MINUTES = {"forward": 5.3, "backward": 5.4, "side": 5.7, "diagonal": 2.4, "mixed": 13.3}
 AUTHORS_SAMPLES = {"originals": 96_065, "with_mirrors": 192_130}
 CLASS_COLOURS = {

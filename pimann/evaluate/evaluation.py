@@ -1,4 +1,4 @@
-"""The study's evaluation (SPEC 8): rollouts -> tidy metrics, seed statistics, figure data, claims.
+"""The study's evaluation (Sec. IV): rollouts -> tidy metrics, seed statistics, figure data, claims.
 
 Reads the rollouts (layout: pimann.generate.rollout_layout) and writes under results/
 (`write_results`):

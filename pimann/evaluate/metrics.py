@@ -1,4 +1,4 @@
-"""The paper's evaluation of a trajectory (SPEC 8): support-foot sliding, drift, foot pitch.
+"""The paper's evaluation of a trajectory (paper Sec. IV): support-foot sliding, drift, foot pitch.
 
 Support-foot velocity RMSE, as the authors compute it: at each frame where a foot is in
 contact, the RMS over the 3 linear (resp. 3 angular) components of that sole's velocity in the

@@ -1,4 +1,4 @@
-"""Autoregressive trajectory generation with control-informed steering (SPEC 7, Sec. III-C).
+"""Autoregressive trajectory generation with control-informed steering (paper Sec. III-C).
 
 One network step per frame (50 Hz) from the standing configuration, driven by a command script
 (a scenario: segments of body-frame velocity and yaw rate, or 'stand'). Step i:
@@ -22,7 +22,7 @@ One network step per frame (50 Hz) from the standing configuration, driven by a 
    pinned at its last world position on the ground (z = 0); a change of corner on the same foot
    counts (a rolling foot, as in ADHERENT; the authors' later code re-pins on a change of foot
    only). With R_i and the new joints (FK of the two sole frames), the base is placed so that
-   the support point stays put. Contacts: the Schmitt trigger (SPEC 1) on each foot's lowest
+   the support point stays put. Contacts: the Schmitt trigger (core.contacts) on each foot's lowest
    corner height, both feet in contact at the start.
 
 Goal rule (authors' values k0 = 0.2, k1 = 2.0, goal factor 2.5, radius 0.3 m). When a motion

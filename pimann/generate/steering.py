@@ -1,4 +1,4 @@
-"""Control-informed steering (SPEC 7, Eqs. lin_pid and rot_pid) and the goal logic around it.
+"""Control-informed steering (Sec. III-C, Eqs. lin_pid, rot_pid) and the goal logic around it.
 
 The network's base velocities drift because of biases in the data; closing a proportional loop
 on the base pose towards a user goal removes the drift without retraining:

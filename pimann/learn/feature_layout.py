@@ -1,4 +1,4 @@
-"""Where each quantity sits in a sample's input x and output y (SPEC 4), the windows in frames,
+"""Where each quantity sits in a sample's input x and output y (Sec. III-A), the windows in frames,
 and the z-score statistics that normalise both: what training, generation and the model files
 share about the features (pimann.learn.features builds them)."""
 

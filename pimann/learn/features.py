@@ -1,4 +1,4 @@
-"""Training features (SPEC 4, paper Eqs. nn_input and nn_output) and the leak-free split.
+"""Training features (paper Sec. III-A, Eqs. nn_input and nn_output) and the leak-free split.
 
 Step i of a clip gives one sample, as the authors' code builds it. The input x_i holds the base
 linear and angular velocities at the input window's offsets around frame i, each rotated into

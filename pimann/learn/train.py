@@ -1,4 +1,4 @@
-"""Training of the (physics-informed) MANN: L = L_D + w L_B (SPEC 5, 6; Eq. overall_loss).
+"""Training of the (physics-informed) MANN: L = L_D + w L_B (paper Sec. III-B, Eq. overall_loss).
 
 The seeds of one PI weight train together as vectorised ensembles (`MANN.from_seeds`), split
 over `train.workers` single-threaded processes on the CPU: the members never mix (their

@@ -1,4 +1,4 @@
-"""The training loss L = L_D + w L_B per ensemble member (SPEC 5, 6; Eq. overall_loss).
+"""The training loss L = L_D + w L_B per ensemble member (paper Sec. III-B, Eq. overall_loss).
 
 L_D is the MSE on the normalised outputs; L_B (`PhysicsInformedLoss`) is taken in physical
 units on the denormalised prediction: the base twist at step i (the output window's offset

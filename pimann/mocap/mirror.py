@@ -6,7 +6,7 @@ left foot is the new right foot, so left and right are swapped as well.
 
 A human motion is mirrored segment by segment (every XSens frame is x forward, y left, z up
 in the T-pose, so M R M of a left segment is a valid right segment). A robot trajectory is
-mirrored in joint space (SPEC section 2): ergoCub's left and right limbs already have
+mirrored in joint space (docs/data.md): ergoCub's left and right limbs already have
 mirrored joint axes, so the limb joints are only swapped; only the torso and neck roll and
 yaw change sign. Forward kinematics of the result equals the mirror of every link.
 """

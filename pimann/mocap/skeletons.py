@@ -3,7 +3,7 @@
 Names: the common conventions are recognised from a file's joint names alone; others are
 named in params `data.skeletons`. Axes: no per-skeleton table. Every segment gets the
 constant right factor P with R_seg(t) = C R_bvh(t) P that best matches the segment's
-XSens frame as the joint positions define it in every frame (SPEC 2: bones for the limbs'
+XSens frame as the joint positions define it in every frame (bones for the limbs'
 long axes, the knee and elbow flexion axes for their lateral axes, the floor for the feet).
 The joint's own frame is arbitrary (any rest pose, any local axes), so P is found in the
 joint's local coordinates, where a rigid landmark is constant: the long axis is kept

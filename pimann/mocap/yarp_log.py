@@ -1,7 +1,7 @@
 """XSens MVN suit data as logged through YARP (the paper's raw recordings), one frame a line.
 
 No genuine log is available here, so the layout below is a faithful reconstruction from the
-SPEC (second token = timestamp; each segment as a `XsensSuit::vLink::<Name>` entry followed
+format (second token = timestamp; each segment as a `XsensSuit::vLink::<Name>` entry followed
 by a parenthesised group with the orientation quaternion w x y z, then the position x y z in
 metres) and from how YARP bottles print: lists in parentheses, strings in double quotes,
 numbers bare. The writer produces, per frame (one line, wrapped here):

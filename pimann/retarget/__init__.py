@@ -1,4 +1,4 @@
-"""Whole-body geometric retargeting of human motion onto ergoCub (SPEC 3).
+"""Whole-body geometric retargeting of human motion onto ergoCub (docs/retargeting.md).
 
 `retarget_motion` resamples the human motion to the output rate, finds the person's foot
 contacts and plans the robot's soles from them (feet.py), pre-processes the segment

@@ -1,7 +1,8 @@
 """Where the robot's feet go: the person's foot contacts and the robot's sole targets.
 
 A robot copying a person's leg angles slides its feet: its legs are shorter, its soles are
-rigid plates, and a flat-foot target glides along the floor at every touchdown (SPEC 3.2).
+rigid plates, and a flat-foot target glides along the floor at every touchdown
+(docs/retargeting.md).
 So the feet are planned first and the IK follows the plan (ik.py):
 
 1. Contacts from the person's heel and toe (`HumanMotion.contact_points`): a point is down

@@ -59,7 +59,7 @@ class FootSpacingLimit(Limit):
 class FloorLimit(Limit):
     """Every sole corner stays at or above the floor (z >= 0), linearised. The sole targets
     are costs traded against the legs' segment targets, and costs alone let soles through
-    the floor (SPEC 3.1; the whole data set had a sole corner 12.8 cm under it)."""
+    the floor (docs/retargeting.md; the whole data set had a sole corner 12.8 cm under it)."""
 
     def __init__(self, robot: Robot):
         self.model = robot.model

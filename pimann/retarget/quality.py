@@ -1,4 +1,4 @@
-"""How good a retargeting is (SPEC 3.1 "Targets a good retargeting meets").
+"""How good a retargeting is (the targets of docs/retargeting.md).
 
 `frame_measures` gives per-frame raw measures of one clip; `summarize` pools any number of
 clips (so medians are over all frames of the set, not medians of medians).
@@ -131,7 +131,7 @@ def _spread(values: np.ndarray) -> dict[str, float]:
 
 
 def quality_report(quality: dict) -> str:
-    """The SPEC 3.1 figures as a short text table, for people reading the stage's output."""
+    """The quality figures as a short text table, for people reading the stage's output."""
     lines = [f"{'segment':<16}{'median deg':>11}{'p95 deg':>9}"]
     for segment, error in quality["orientation_error_deg"].items():
         lines.append(f"{segment:<16}{error['median']:>11.2f}{error['p95']:>9.2f}")

@@ -1,4 +1,4 @@
-"""Trajectory control in MuJoCo (paper Sec. II-C, both controllers; SPEC 9).
+"""Trajectory control in MuJoCo (paper Sec. II-C, both controllers).
 
 model: the MuJoCo ergoCub from the `_minContacts` URDF, foot forces and measured ZMP.
 footsteps: footsteps and timing from a generated trajectory's contacts (0.33x speed, 0.4x steps).

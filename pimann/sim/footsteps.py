@@ -1,4 +1,4 @@
-"""Footsteps and contact timing from a generated trajectory's contacts (SPEC 9.1's advice).
+"""Footsteps and contact timing from a generated trajectory's contacts (docs/controllers.md).
 
 The generated joints are not replayed: each contact phase of a foot becomes one footstep
 (mean sole position and yaw over the phase), time is slowed by `speed_scale` and the walking

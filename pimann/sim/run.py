@@ -1,8 +1,8 @@
 """Closed loop: footsteps -> offline DCM/ZMP plan -> whole-body IK + ZMP-CoM feedback -> MuJoCo.
 
 The IK and the feedback run at `control_rate_hz` (100 Hz), MuJoCo at 1 kHz; the measured ZMP
-is low-pass filtered at every physics step (SPEC 9.1: unfiltered touchdown spikes throw the
-feedback). The generated joints are only a low-weight posture target.
+is low-pass filtered at every physics step (docs/controllers.md: unfiltered touchdown spikes
+throw the feedback). The generated joints are only a low-weight posture target.
 
 The IK lives in the plan's world, while each touchdown in the simulation lands a few mm off
 and the errors add up; the measured CoM and ZMP are therefore shifted by the loaded feet's

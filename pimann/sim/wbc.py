@@ -20,7 +20,7 @@ from pimann.core.params import SimulateParams
 from pimann.core.robot import CHEST_FRAME, LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS, Robot
 from pimann.core.rotations import rot_z
 
-SOLE_HEIGHT = 0.002  # the foot boxes' bottoms lie this far above the sole frames (SPEC 9.1)
+SOLE_HEIGHT = 0.002  # the foot boxes' bottoms lie this far above the soles (docs/controllers.md)
 
 
 def sole_pose(position_xy, z: float, yaw: float) -> pin.SE3:
@@ -126,8 +126,9 @@ class LowPass:
 def standing_pose(robot: Robot, params: SimulateParams, iterations: int = 200) -> np.ndarray:
     """A standing configuration with flat soles on the floor and the CoM at `com_height`.
 
-    SPEC 1's standing pose has a pitched base and slightly yawed soles; the IK keeps its joints
-    as the posture reference and puts the soles flat, parallel, at their lateral spacing.
+    ergoCub's standing pose (core.robot) has a pitched base and slightly yawed soles; the IK
+    keeps its joints as the posture reference and puts the soles flat, parallel, at their
+    lateral spacing.
     """
     q0 = robot.standing_configuration()
     left = robot.frame_placement(q0, LEFT_SOLE).translation
