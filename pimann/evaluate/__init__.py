@@ -1,2 +1,4 @@
-"""Evaluation (paper Sec. V): the metrics, the claims, command following, the data report and
-its reference, and the results reader the report's figures use."""
+"""Evaluation (paper Sec. IV): the metrics, the claims, command following, the data report and
+its reference, and the results reader the report's figures use.
+
+A package's summary only (hence so short): its modules hold the code."""
