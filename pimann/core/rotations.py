@@ -27,6 +27,36 @@ def rot_z(angle: np.ndarray | float) -> np.ndarray:
     return out
 
 
+def _planar_rotation(vectors, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """A float copy of `vectors` broadcast against `yaw` (...), its x and y, cos and sin yaw."""
+    vectors = np.asarray(vectors, dtype=float)
+    shape = np.broadcast_shapes(vectors.shape, (*np.shape(yaw), vectors.shape[-1]))
+    out = np.broadcast_to(vectors, shape).copy()
+    return out, out[..., :2].copy(), np.cos(yaw), np.sin(yaw)
+
+
+def to_heading_frame(vectors: np.ndarray, yaw: np.ndarray | float) -> np.ndarray:
+    """World vectors (..., 2 or 3) in the heading frame of `yaw` (...), x forward, y left: turned
+    by -yaw about z, x' = c x + s y, y' = -s x + c y (c, s = cos, sin yaw); z passes unchanged.
+    Leading axes broadcast; the inverse of `from_heading_frame`."""
+    out, xy, c, s = _planar_rotation(vectors, yaw)
+    x, y = xy[..., 0], xy[..., 1]
+    out[..., 0] = c * x + s * y
+    out[..., 1] = -s * x + c * y
+    return out
+
+
+def from_heading_frame(vectors: np.ndarray, yaw: np.ndarray | float) -> np.ndarray:
+    """Heading-frame vectors (..., 2 or 3) of `yaw` (...) in the world frame: turned by yaw
+    about z, x' = c x - s y, y' = s x + c y (c, s = cos, sin yaw); z passes unchanged.
+    Leading axes broadcast; the inverse of `to_heading_frame`."""
+    out, xy, c, s = _planar_rotation(vectors, yaw)
+    x, y = xy[..., 0], xy[..., 1]
+    out[..., 0] = c * x - s * y
+    out[..., 1] = s * x + c * y
+    return out
+
+
 def yaw_only(rotations: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotations reduced to their heading (ground projection: roll, pitch zeroed)."""
     return rot_z(yaw_of(rotations))

@@ -47,7 +47,7 @@ from pimann.core.contacts import frame_period, touchdowns
 from pimann.core.errors import PimannError
 from pimann.core.params import ContactParams, EvaluateParams, Segment, StandSegment
 from pimann.core.robot import Robot
-from pimann.core.rotations import yaw_of
+from pimann.core.rotations import to_heading_frame, yaw_of
 from pimann.core.trajectory import Trajectory
 from pimann.evaluate.metrics import trajectory_time_series
 from pimann.generate.clip_commands import STANDING, segment_class
@@ -159,10 +159,7 @@ def follow_measures(
         s = min(a + round(_settle(duration, settle_s) / dt), b - 1)
         moved = np.diff(position[s : b + 1], axis=0) / dt
         mid = (yaw[s:b] + yaw[s + 1 : b + 1]) / 2
-        cos, sin = np.cos(mid), np.sin(mid)
-        achieved = np.stack(
-            [cos * moved[:, 0] + sin * moved[:, 1], -sin * moved[:, 0] + cos * moved[:, 1]], -1
-        ).mean(axis=0)
+        achieved = to_heading_frame(moved, mid).mean(axis=0)
         achieved_yaw_rate = (yaw[b] - yaw[s]) / ((b - s) * dt)
         speed = math.hypot(*command[:2])
         along = float(achieved @ command[:2] / speed) if speed > 0 else math.nan

@@ -36,7 +36,7 @@ from pimann.core.atomic import atomic_path, write_text_atomic
 from pimann.core.parallel import pool_map
 from pimann.core.params import Params, StandSegment
 from pimann.core.robot import load_robot
-from pimann.core.rotations import yaw_of
+from pimann.core.rotations import from_heading_frame, to_heading_frame, yaw_of
 from pimann.evaluate import command_following as cf
 from pimann.generate.benchmark_clips import benchmark_clips
 from pimann.generate.clip_commands import clip_commands
@@ -71,9 +71,8 @@ def script_displacement(script: Sequence[cf.Segment], rate_hz: float) -> np.ndar
     )[steps]  # fmt: skip
     yaw = np.concatenate([[0.0], np.cumsum(commands[:, 2] * dt)])
     mid = (yaw[:-1] + yaw[1:]) / 2
-    cos, sin = np.cos(mid), np.sin(mid)
-    vx, vy = commands[:, 0], commands[:, 1]
-    return np.array([np.sum(cos * vx - sin * vy), np.sum(sin * vx + cos * vy)]) * dt
+    world = from_heading_frame(commands[:, :2], mid)
+    return np.array([np.sum(world[:, 0]), np.sum(world[:, 1])]) * dt
 
 
 def _rollout_displacement(trajectory) -> np.ndarray:
@@ -81,9 +80,7 @@ def _rollout_displacement(trajectory) -> np.ndarray:
     xy = np.asarray(trajectory.base_position, dtype=float)[:, :2]
     yaw = yaw_of(Rotation.from_quat(trajectory.base_quaternion_xyzw[0]).as_matrix())
     d = xy[-1] - xy[0]
-    return np.array(
-        [math.cos(yaw) * d[0] + math.sin(yaw) * d[1], -math.sin(yaw) * d[0] + math.cos(yaw) * d[1]]
-    )
+    return to_heading_frame(d, yaw)
 
 
 def measure(trajectory, script: Sequence[cf.Segment], params: Params) -> list[dict[str, Any]]:

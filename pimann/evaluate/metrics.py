@@ -31,7 +31,6 @@ y left), and changes of roll, pitch and (unwrapped) yaw since the first frame.
 from __future__ import annotations
 
 import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,7 +50,7 @@ from pimann.core.contacts import (
 from pimann.core.errors import PimannError, about
 from pimann.core.params import ContactParams, EvaluateParams
 from pimann.core.robot import Robot, load_robot
-from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch
+from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch, to_heading_frame
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
 from pimann.evaluate.sliding import (
     SHARE_METRICS,
@@ -135,17 +134,8 @@ def base_drift(trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
     angles = rpy_arcsin_pitch(quaternion_xyzw_matrices(trajectory.base_quaternion_xyzw))
     angles[:, 2] = np.unwrap(angles[:, 2])
     yaw0 = angles[0, 2]
-    cos, sin = math.cos(yaw0), math.sin(yaw0)
     delta = np.asarray(trajectory.base_position, dtype=float) - trajectory.base_position[0]
-    displacement = np.stack(
-        [
-            cos * delta[:, 0] + sin * delta[:, 1],
-            -sin * delta[:, 0] + cos * delta[:, 1],
-            delta[:, 2],
-        ],
-        axis=-1,
-    )
-    return displacement, angles - angles[0]
+    return to_heading_frame(delta, yaw0), angles - angles[0]
 
 
 def _check_time(trajectory: Trajectory) -> np.ndarray:

@@ -31,6 +31,7 @@ from pimann.core.params import ContactParams, RolloutParams
 from pimann.core.robot import Robot
 from pimann.core.rotations import (
     exp_so3,
+    from_heading_frame,
     matrix_to_rpy,
     roll_pitch,
     rot_z,
@@ -48,15 +49,6 @@ from pimann.learn.future_window import command_weights, next_future_matrix
 from pimann.learn.standing import StandingPose
 
 SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
-
-
-def _planar(yaw: np.ndarray, vector: np.ndarray) -> np.ndarray:
-    """Heading-frame (x, y) vectors (B, 2) in the world frame."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    out = np.empty(vector.shape)
-    out[:, 0] = c * vector[:, 0] - s * vector[:, 1]
-    out[:, 1] = s * vector[:, 0] + c * vector[:, 1]
-    return out
 
 
 def data_start(
@@ -246,7 +238,7 @@ class BatchGenerator:
                 self.fed_rpy[restart, 2] = self.yaw[restart]
         move = ~stand  # a held command: the path (and the goal) move with it
         self.desired_yaw = self.desired_yaw + np.where(move, yaw_rate * self.dt, 0.0)
-        direction = _planar(self.desired_yaw, velocity)
+        direction = from_heading_frame(velocity, self.desired_yaw)
         if self.params.held_command == "carrot":
             self.path[:, :2] += np.where(move[:, None], direction * self.dt, 0.0)
             goal = goal_from_command(
@@ -281,7 +273,7 @@ class BatchGenerator:
         if self.params.start_history == "command":
             rotation = self.rotation[rows]
             linear = np.zeros((len(rows), 3))
-            linear[:, :2] = _planar(yaw_of(rotation), velocity)
+            linear[:, :2] = from_heading_frame(velocity, yaw_of(rotation))
             self.history[rows, :, 0] = linear[:, None]
             self.history[rows, :, 1, 2] = yaw_rate[:, None]
             self.future[rows, 0] = linear[:, None] @ rotation  # R^T v
@@ -291,7 +283,7 @@ class BatchGenerator:
         """Under 'stand': at once without steering; at, or past, the goal with it."""
         offset = self.position[:, :2] - self.goal[:, :2]
         close = np.hypot(offset[:, 0], offset[:, 1]) <= self.params.goal_radius
-        heading = _planar(self.desired_yaw, self.heading_velocity)
+        heading = from_heading_frame(self.heading_velocity, self.desired_yaw)
         passed = self.heading_velocity.any(axis=1) & (
             offset[:, 0] * heading[:, 0] + offset[:, 1] * heading[:, 1] >= 0
         )
@@ -343,7 +335,7 @@ class BatchGenerator:
         y = self.y[rows] = self.network(x)
         self._lap("network")
         command_world = np.zeros((n, 3))
-        command_world[:, :2] = _planar(yaw_of(base), velocity[rows])
+        command_world[:, :2] = from_heading_frame(velocity[rows], yaw_of(base))
         command_linear = command_world[:, None] @ base  # R^T v, (n, 1, 3)
         command_angular = (base[:, 2] * yaw_rate[rows, None])[:, None]  # R^T [0, 0, yaw rate]
         weights = self.weights

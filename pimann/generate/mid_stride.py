@@ -36,7 +36,7 @@ from scipy.spatial.transform import Rotation
 from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.core.rotations import roll_pitch, yaw_of
+from pimann.core.rotations import roll_pitch, to_heading_frame, yaw_of
 from pimann.core.trajectory import Trajectory
 from pimann.generate.benchmark_clips import held_out_clips
 from pimann.learn.model_files import model_seeds
@@ -96,9 +96,7 @@ def network_ratio(rollout: Rollout, command: MotionSegment) -> float:
     settled = trajectory.time >= SETTLE_S
     yaw = yaw_of(Rotation.from_quat(trajectory.base_quaternion_xyzw[settled]).as_matrix())
     world = rollout.base_velocity[settled]
-    forward = np.cos(yaw) * world[:, 0] + np.sin(yaw) * world[:, 1]
-    left = -np.sin(yaw) * world[:, 0] + np.cos(yaw) * world[:, 1]
-    return _ratio_along(np.stack([forward, left], axis=1), command)
+    return _ratio_along(to_heading_frame(world[:, :2], yaw), command)
 
 
 def leg_joint_agreement(trajectory: Trajectory) -> float:

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pimann.core.rotations import yaw_of
+from pimann.core.rotations import rot_z, yaw_of
 
 
 def steer(
@@ -44,10 +44,7 @@ def steer(
     if planar:
         position_error = position_error * np.array([1.0, 1.0, 0.0])
         yaw = yaw_of(R)
-        frame = np.zeros(yaw.shape + (3, 3))
-        frame[..., 0, 0] = frame[..., 1, 1] = np.cos(yaw)
-        frame[..., 1, 0], frame[..., 0, 1] = np.sin(yaw), -np.sin(yaw)
-        frame[..., 2, 2] = 1.0
+        frame = rot_z(yaw)
     linear = (position_error[..., None, :] @ frame)[..., 0, :]  # R^T (p - p_d)
     relative = np.swapaxes(np.asarray(R_desired, dtype=float), -1, -2) @ R  # R_d^T R
     angular = np.empty(relative.shape[:-1])  # vee(skew_part(R_d^T R)), without the matrices

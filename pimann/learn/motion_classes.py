@@ -22,7 +22,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann.core.contacts import frame_period
 from pimann.core.errors import PimannError
-from pimann.core.rotations import yaw_of
+from pimann.core.rotations import to_heading_frame, yaw_of
 from pimann.core.trajectory import Trajectory
 
 WINDOW_S = 1.0  # s, centred window of the base velocity and yaw rate
@@ -57,11 +57,7 @@ def base_motion(trajectory: Trajectory, window_s: float = WINDOW_S):
     heading = (sums[hi + 1] - sums[lo]) / (hi + 1 - lo)
     position = np.asarray(trajectory.base_position, dtype=float)
     world = (position[hi, :2] - position[lo, :2]) / span[:, None]
-    cos, sin = np.cos(heading), np.sin(heading)
-    velocity = np.stack(
-        [cos * world[:, 0] + sin * world[:, 1], -sin * world[:, 0] + cos * world[:, 1]], -1
-    )
-    return velocity, (yaw[hi] - yaw[lo]) / span
+    return to_heading_frame(world, heading), (yaw[hi] - yaw[lo]) / span
 
 
 def classify(velocity: np.ndarray, yaw_rate: np.ndarray) -> np.ndarray:

@@ -15,15 +15,10 @@ import pinocchio as pin
 from pimann.core.errors import PimannError
 from pimann.core.params import SimulateParams
 from pimann.core.robot import Robot
+from pimann.core.rotations import from_heading_frame, to_heading_frame
 from pimann.core.trajectory import Trajectory
 from pimann.sim.dcm import SHIFT_MAX
 from pimann.sim.footsteps import FootstepPlan, mid_feet, sole_trajectories
-
-
-def _rotate(xy: np.ndarray, yaw: np.ndarray) -> np.ndarray:
-    """(T, 2) vectors turned by yaw (T,) about z."""
-    c, s = np.cos(yaw), np.sin(yaw)
-    return np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1]])
 
 
 def generated_com_offsets(robot: Robot, trajectory: Trajectory) -> np.ndarray:
@@ -41,7 +36,7 @@ def generated_com_offsets(robot: Robot, trajectory: Trajectory) -> np.ndarray:
         )
         com[k] = pin.centerOfMass(robot.model, robot.data, q)[:2]
     mid = mid_feet(sole_trajectories(robot, trajectory))
-    return _rotate(com - mid[:, :2], -mid[:, 2])
+    return to_heading_frame(com - mid[:, :2], mid[:, 2])
 
 
 def _smoothstep(s: np.ndarray) -> np.ndarray:
@@ -94,4 +89,4 @@ def com_reference(
     feet = np.array([[(*pose[:2], yaw) for pose, yaw in (plan.foot_pose(s, t) for s in (0, 1))]
                      for t in times])  # fmt: skip
     mid = mid_feet(feet)
-    return mid[:, :2] + _rotate(weight[:, None] * offset, mid[:, 2])
+    return mid[:, :2] + from_heading_frame(weight[:, None] * offset, mid[:, 2])

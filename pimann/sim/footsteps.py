@@ -18,7 +18,7 @@ from pimann.core.contacts import true_runs
 from pimann.core.errors import PimannError
 from pimann.core.params import SimulateParams
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, Robot
-from pimann.core.rotations import rot_z
+from pimann.core.rotations import rot_z, to_heading_frame
 from pimann.core.trajectory import Trajectory
 from pimann.sim.wbc import SOLE_HEIGHT
 
@@ -101,9 +101,8 @@ def compose(pose: np.ndarray, increment: np.ndarray) -> np.ndarray:
 
 def relative(pose: np.ndarray, other: np.ndarray) -> np.ndarray:
     """The increment that takes `pose` to `other`, in `pose`'s frame (inverse of compose)."""
-    c, s = np.cos(pose[2]), np.sin(pose[2])
-    dx, dy = other[0] - pose[0], other[1] - pose[1]
-    return np.array([c * dx + s * dy, -s * dx + c * dy, float(_wrap(other[2] - pose[2]))])
+    dx, dy = to_heading_frame(np.asarray(other[:2]) - np.asarray(pose[:2]), pose[2])
+    return np.array([dx, dy, float(_wrap(other[2] - pose[2]))])
 
 
 def mid_feet(feet: np.ndarray) -> np.ndarray:
