@@ -133,3 +133,19 @@ def test_sole_pitch_of_a_pitched_sole(robot):
     kinematics = foot_kinematics(robot, q[None])
     flat = foot_kinematics(robot, robot.standing_configuration()[None])
     np.testing.assert_allclose(kinematics.pitches - flat.pitches, 0.3, atol=0.01)
+
+
+def test_lowest_corner_is_the_min_over_every_corner(robot, rng):
+    """The lowest corner of either foot, as retarget.quality and the data report read it, is
+    the minimum over all world corners p + R c, to the bit (adding p keeps the order)."""
+    from builders import random_configuration
+
+    from pimann.core.robot import corner_offsets
+
+    configurations = np.array([random_configuration(robot, rng) for _ in range(8)])
+    feet = foot_kinematics(robot, configurations)
+    corners = feet.positions[:, :, None] + corner_offsets(feet.rotations)  # (T, 2, C, 3)
+    np.testing.assert_array_equal(
+        lowest_corner_heights(feet.positions, feet.rotations).min(axis=1),
+        corners[..., 2].min(axis=(1, 2)),
+    )
