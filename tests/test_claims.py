@@ -10,8 +10,8 @@ import pytest
 from builders import AGREEING, REFERENCE, crafted_metrics
 
 from pimann.core.params import load_params
-from pimann.evaluate.claim_rules import CONFIGURATION_HELD
 from pimann.evaluate.claims import (
+    CONFIGURATION_HELD,
     FAILS,
     HOLDS,
     NOT_COMPARABLE,

@@ -33,7 +33,6 @@ PATHS = f"{PACKAGE}/core/paths.py"
 EVALUATION_MODULES = (
     "pimann/evaluate/evaluation.py",
     "pimann/evaluate/claims.py",
-    "pimann/evaluate/claim_rules.py",
 )
 GENERATION_STAGES = ("rollout", "rollout_baseline", "simulate")
 
@@ -391,7 +390,7 @@ def test_editing_the_steering_law_reruns_the_rollouts_and_no_training():
 def test_rewording_a_claim_reruns_the_evaluation_onward_only():
     """The claims are judged by the evaluate stage; the data report, generation and the
     trainings never import them."""
-    for module in ("pimann/evaluate/claims.py", "pimann/evaluate/claim_rules.py"):
-        reruns = _stages_listing(module)
-        assert "evaluate" in reruns, module
-        assert reruns <= {"evaluate", "figures", "report"}, f"{module} reruns {sorted(reruns)}"
+    module = "pimann/evaluate/claims.py"
+    reruns = _stages_listing(module)
+    assert "evaluate" in reruns, module
+    assert reruns <= {"evaluate", "figures", "report"}, f"{module} reruns {sorted(reruns)}"

@@ -44,7 +44,6 @@ from pimann.learn.model_files import model_seeds
 EVALUATION = (
     "pimann.evaluate.evaluation",
     "pimann.evaluate.claims",
-    "pimann.evaluate.claim_rules",
     "pimann.evaluate.data_reference",
 )
 

@@ -32,7 +32,7 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.params import Params
-from pimann.evaluate.claim_rules import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD
+from pimann.evaluate.claims import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD
 from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,
