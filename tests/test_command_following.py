@@ -31,7 +31,7 @@ from pimann.evaluate import command_following as cf
 from pimann.evaluate.command_following_figure import fig_command_following
 from pimann.evaluate.figure_style import style
 from pimann.evaluate.following import summary_table
-from pimann.generate.clip_commands import clip_commands, segment_class
+from pimann.generate.command_script import clip_commands, segment_class
 
 DT = 1.0 / RATE
 

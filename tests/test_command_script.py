@@ -1,4 +1,4 @@
-"""Command scripts as the generator reads them (pimann.command_script)."""
+"""Command scripts as the generator reads them (pimann.generate.command_script)."""
 
 from __future__ import annotations
 

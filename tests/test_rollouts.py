@@ -20,7 +20,7 @@ from pimann.core.errors import PimannError
 from pimann.core.params import MotionSegment, StandSegment, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
-from pimann.generate.clip_commands import clip_commands
+from pimann.generate.command_script import clip_commands
 from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,

@@ -1,6 +1,6 @@
 """Command following (beyond the paper): does a rollout do what its script commands?
 
-Command scripts from the data: pimann.generate.clip_commands.
+Command scripts from the data: pimann.generate.command_script.
 
 Measures per segment of a rollout (`follow_measures`), frame k of a 50 Hz rollout being the
 state after step k (pimann.generate.command_script.scenario_steps: segment i runs from its start
@@ -50,8 +50,7 @@ from pimann.core.robot import Robot
 from pimann.core.rotations import to_heading_frame, yaw_of
 from pimann.core.trajectory import Trajectory
 from pimann.evaluate.metrics import trajectory_time_series
-from pimann.generate.clip_commands import STANDING, segment_class
-from pimann.generate.command_script import scenario_steps
+from pimann.generate.command_script import STANDING, scenario_steps, segment_class
 from pimann.learn.motion_classes import CLASSES
 
 # ----------------------------------------------------------------------------- thresholds

@@ -39,8 +39,7 @@ from pimann.core.robot import load_robot
 from pimann.core.rotations import from_heading_frame, to_heading_frame, yaw_of
 from pimann.evaluate import command_following as cf
 from pimann.generate.benchmark_clips import benchmark_clips
-from pimann.generate.clip_commands import clip_commands
-from pimann.generate.command_script import scenario_steps
+from pimann.generate.command_script import clip_commands, scenario_steps
 from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,

@@ -20,7 +20,7 @@ from pimann.core.errors import PimannError
 from pimann.core.params import Params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.trajectory import Trajectory, iter_collection
-from pimann.generate.clip_commands import clip_commands
+from pimann.generate.command_script import clip_commands
 from pimann.generate.rollout_layout import (
     HELD_OUT,
     TRAINING,
@@ -118,7 +118,8 @@ def benchmark_clips(collection: str | Path, params: Params) -> list[BenchmarkCli
 def benchmark_scripts(params: Params) -> dict[str, list[Segment]]:
     """{scenario: script} of the command-following benchmark (collection `features.input`):
     each clip of `benchmark_clips` as the commands of its own base motion
-    (pimann.generate.clip_commands.clip_commands); the test clips with `rollout.benchmark_clips`."""
+    (pimann.generate.command_script.clip_commands); the test clips with
+    `rollout.benchmark_clips`."""
     rollout = params.rollout
     if not rollout.benchmark_clips and rollout.benchmark_train_clips == 0:
         return {}
