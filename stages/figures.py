@@ -27,7 +27,7 @@ def main(argv: list[str] | None = None) -> None:
     started = time.perf_counter()
     params = load_params()
     written = make_figures(
-        REPO_ROOT / args.results, REPO_ROOT / args.out, params.figures, params.evaluate.pi_weight
+        REPO_ROOT / args.results, REPO_ROOT / args.out, params.figures, params.evaluate
     )
     log.info("%d figures -> %s in %.1f s", len(written), args.out, time.perf_counter() - started)
 

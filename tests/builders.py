@@ -52,6 +52,12 @@ from pimann.learn.train import train_models
 CONTACT_PARAMS = ContactParams(on_height=0.02, off_height=0.02, switch_time=0.04)
 EVALUATE_PARAMS = EvaluateParams(
     pi_weight=10.0,
+    scenario="forward",
+    box_weights=[0.0, 1.0, 10.0, 20.0],
+    large_weight=100.0,
+    foot_height_weights=[0.0, 10.0],
+    foot_steering=False,
+    drift_reduction=0.5,
     skating_height=0.05,
     skating_speed_per_frame=0.025,
     skating_rate_hz=20.0,

@@ -41,7 +41,7 @@ def _rows(frame, model, steering=False):
 
 
 def test_claims_hold_on_agreeing_numbers(params):
-    claims = evaluate_claims(crafted_metrics(), params.figures, params.evaluate.pi_weight)
+    claims = evaluate_claims(crafted_metrics(), params.evaluate)
     assert [c.id for c in claims] == ALL
     assert all(status == HOLDS for status in statuses(claims).values()), statuses(claims)
 
@@ -56,7 +56,7 @@ def test_claims_fail_on_contradicting_numbers(params):
     frame.loc[frame["model"] == "w100", "walks"] = True  # w=100 walks unsteered too
     # steering leaves the yaw drift of w=10 as large as without
     frame.loc[_rows(frame, "w10", True), "drift_yaw_max_abs"] = 0.6
-    claims = statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))
+    claims = statuses(evaluate_claims(frame, params.evaluate))
     assert claims["C2"] == HOLDS  # linear still below the baseline for every w
     assert claims["C3"] == FAILS
     assert claims["C5"] == FAILS
@@ -69,11 +69,7 @@ def test_claims_fail_on_contradicting_numbers(params):
 
 def test_claims_without_baseline_are_not_comparable(params):
     frame = crafted_metrics()
-    claims = statuses(
-        evaluate_claims(
-            frame[frame["model"] != BASELINE], params.figures, params.evaluate.pi_weight
-        )
-    )
+    claims = statuses(evaluate_claims(frame[frame["model"] != BASELINE], params.evaluate))
     for claim in ("C1", "C2", "C3", "C4", "C12", "C13"):
         assert claims[claim] == NOT_COMPARABLE, claim
     assert claims["C5"] == HOLDS
@@ -81,20 +77,20 @@ def test_claims_without_baseline_are_not_comparable(params):
 
 def test_c1_compares_angular_directly_and_linear_in_the_world_representation(params):
     frame = crafted_metrics()
-    c1 = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0]
+    c1 = evaluate_claims(frame, params.evaluate)[0]
     assert c1.id == "C1" and c1.status == HOLDS
     assert "world" in c1.ours and "local_world_aligned" in c1.ours and "velocity-level" in c1.metric
     # our representation at the paper's number does not help: the world one is x2.2 the paper's
     frame["support_rmse_linear_total"] = 22.88
     frame["support_rmse_linear_world_total"] = 2.2 * 22.88
-    c1 = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0]
+    c1 = evaluate_claims(frame, params.evaluate)[0]
     assert c1.status == FAILS and "linear x2.20" in c1.reason
     # within a factor 2 both ways: half the paper's angular still holds, a third does not
     frame["support_rmse_linear_world_total"] = 22.88
     frame["support_rmse_angular_total"] = 17.74 / 1.9
-    assert evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0].status == HOLDS
+    assert evaluate_claims(frame, params.evaluate)[0].status == HOLDS
     frame["support_rmse_angular_total"] = 17.74 / 3
-    assert evaluate_claims(frame, params.figures, params.evaluate.pi_weight)[0].status == FAILS
+    assert evaluate_claims(frame, params.evaluate)[0].status == FAILS
 
 
 def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
@@ -104,21 +100,19 @@ def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
     frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 4, 4, 4, 17.8]
     # w=10's contact feet: median slower than w=0's, one seed faster than w=0's slowest
     frame.loc[_rows(frame, "w10"), "contact_foot_speed_mean_position"] = [0.1, 0.1, 0.1, 0.1, 0.3]
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
     assert claims["C3"].status == WITHIN_SPREAD and "w=20" in claims["C3"].reason
     assert claims["C14"].status == WITHIN_SPREAD
     assert claims["C2"].status == HOLDS
     # medians in the wrong order do not hold at all
     frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 30, 30, 30, 30]
-    assert (
-        statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))["C3"] == FAILS
-    )
+    assert statuses(evaluate_claims(frame, params.evaluate))["C3"] == FAILS
 
 
 def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False  # unsteered w=10 stands still
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
     for claim in ("C2", "C3", "C4", "C5", "C14"):
         assert claims[claim].status == STANDS_STILL, claim
         assert "w10 seeds 0, 1, 2, 3, 4 do not walk" in claims[claim].reason
@@ -127,7 +121,7 @@ def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     assert claims["C10"].status == HOLDS and claims["C11"].status == HOLDS
     assert claims["C12"].status == HOLDS  # the favoured one is the baseline: it walks
     frame.loc[_rows(frame, BASELINE) & (frame["seed"] == 3), "walks"] = False
-    claims = statuses(evaluate_claims(frame, params.figures, params.evaluate.pi_weight))
+    claims = statuses(evaluate_claims(frame, params.evaluate))
     assert claims["C1"] == STANDS_STILL and claims["C12"] == STANDS_STILL
 
 
@@ -140,7 +134,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     position = (frame["model"] == "w10").map({True: 12.0, False: 30.0})
     frame["support_rmse_linear_position_total"] = position
     frame["double_support_fraction"] = (frame["model"] == "baseline").map({True: 0.6, False: 0.3})
-    claims = {c.id: c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
     c4 = claims["C4"]
     assert c4.status == FAILS and "no reduction in linear" in c4.reason
     assert "linear -30%" in c4.ours
@@ -153,10 +147,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
 
 
 def test_every_claim_names_its_metric(params):
-    claims = {
-        c.id: c
-        for c in evaluate_claims(crafted_metrics(), params.figures, params.evaluate.pi_weight)
-    }
+    claims = {c.id: c for c in evaluate_claims(crafted_metrics(), params.evaluate)}
     for claim in ("C1", "C2", "C3", "C4", "C5"):
         assert "velocity-level" in claims[claim].metric, claim
     assert "position-level" in claims["C14"].metric
@@ -166,7 +157,7 @@ def test_every_claim_names_its_metric(params):
 def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False
-    claims = evaluate_claims(frame, params.figures, params.evaluate.pi_weight)
+    claims = evaluate_claims(frame, params.evaluate)
     text = claims_markdown(claims, {"profile": "quick"}, REFERENCE)
     for rule in RULES:
         assert rule in text
@@ -189,14 +180,10 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)  # below every other weight's
     frame = crafted_metrics(values)
-    (c9,) = [
-        c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight) if c.id == "C9"
-    ]
+    (c9,) = [c for c in evaluate_claims(frame, params.evaluate) if c.id == "C9"]
     assert c9.status == FAILS and "w=100 (0% of seeds walk)" in c9.reason
     frame.loc[frame["model"] == "w100", "walks"] = True
-    (c9,) = [
-        c for c in evaluate_claims(frame, params.figures, params.evaluate.pi_weight) if c.id == "C9"
-    ]
+    (c9,) = [c for c in evaluate_claims(frame, params.evaluate) if c.id == "C9"]
     assert c9.status == FAILS and "walks at" not in c9.reason
     assert "holds the configuration" not in c9.reason  # the paper's pi_gradient: both
 
@@ -209,9 +196,7 @@ def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
 
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)
-    claims = evaluate_claims(
-        crafted_metrics(values), params.figures, params.evaluate.pi_weight, pi_gradient=pi_gradient
-    )
+    claims = evaluate_claims(crafted_metrics(values), params.evaluate, pi_gradient=pi_gradient)
     (c9,) = [c for c in claims if c.id == "C9"]
     named = f"train.pi_gradient {pi_gradient} holds the configuration" in c9.reason
     assert named == ("joints" in _HELD[pi_gradient]) == (pi_gradient in CONFIGURATION_HELD)

@@ -102,7 +102,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
             benchmark_clips=True,
             benchmark_train_clips=1,
         ),
-        figures=dataclasses.replace(params.figures, scenario="short"),
+        evaluate=dataclasses.replace(params.evaluate, scenario="short"),
     )
     tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
     tiny_models(tmp_path / "models" / "baseline", 0.0, "ground_projected", [0])

@@ -34,7 +34,7 @@ def params():
 def test_every_figure_is_written_with_provenance(params, tmp_path):
     results = crafted_results(tmp_path / "results", params)
     out = tmp_path / "figures"
-    written = make_figures(results, out, params.figures, params.evaluate.pi_weight)
+    written = make_figures(results, out, params.figures, params.evaluate)
     assert set(written) == set(FIGURES)
     for name in FIGURES:
         pdf, png = (out / f"{name}.{fmt}" for fmt in ("pdf", "png"))
@@ -49,7 +49,7 @@ def test_footer_only_when_not_the_paper_profile(params, tmp_path):
     with_quick = load_results(crafted_results(tmp_path / "quick", params, "quick"))
     with_paper = load_results(crafted_results(tmp_path / "paper", params, "paper"))
     for results, expected in ((with_quick, ["profile: quick"]), (with_paper, [])):
-        fig = fig_foot_heights(results, params.figures)
+        fig = fig_foot_heights(results, params.figures, params.evaluate)
         save_figure(fig, tmp_path / f"out_{results.provenance['profile']}", "f",
                     results.provenance)  # fmt: skip
         assert [t.get_text() for t in fig.texts] == expected
@@ -61,17 +61,17 @@ def test_missing_data_skips_the_figure(params, tmp_path, caplog):
     for path in (results / "timeseries").glob("feet_*.csv"):
         path.unlink()
     caplog.set_level(logging.INFO, logger="pimann.report.figures")
-    written = make_figures(results, tmp_path / "out", params.figures, params.evaluate.pi_weight)
+    written = make_figures(results, tmp_path / "out", params.figures, params.evaluate)
     assert set(written) == set(FIGURES) - {"joint_tracking", "foot_rotations", "foot_heights"}
     assert "joint_tracking: no simulation traces" in caplog.text
 
 
 def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     linear = fig.axes[0]
     labels = [t.get_text() for t in linear.get_xticklabels()]
-    assert labels == [f"{w:g}" for w in params.figures.box_weights]
+    assert labels == [f"{w:g}" for w in params.evaluate.box_weights]
     baseline = [line for line in linear.get_lines() if line.get_label() == "baseline"]
     frame = results.metrics
     rows = (frame["model"] == "baseline") & ~frame["steering"]
@@ -81,21 +81,22 @@ def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
 
 def test_box_plot_shows_the_data_level(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     for ax, metric in zip(fig.axes, ("linear", "angular"), strict=True):
         lines = [line for line in ax.get_lines() if line.get_label() == "data"]
         expected = REFERENCE["all"]["metrics"][f"support_rmse_{metric}_total"]["median"]
         assert len(lines) == 1 and lines[0].get_ydata()[0] == pytest.approx(expected)
     assert "data" in [t.get_text() for t in fig.legends[0].get_texts()]
     results = load_results(crafted_results(tmp_path / "bare", params, data=False))
-    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     assert not [line for line in fig.axes[0].get_lines() if line.get_label() == "data"]
 
 
 def test_figures_follow_params(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    wide = dataclasses.replace(params.figures, width_in=7.0, foot_height_weights=[1.0])
-    fig = fig_foot_heights(results, wide)
+    wide = dataclasses.replace(params.figures, width_in=7.0)
+    one = dataclasses.replace(params.evaluate, foot_height_weights=[1.0])
+    fig = fig_foot_heights(results, wide, one)
     assert fig.get_size_inches()[0] == pytest.approx(7.0) and len(fig.axes) == 1
 
 
@@ -103,7 +104,7 @@ def test_legends_sit_outside_the_axes(params, tmp_path):
     """No legend inside an axes (they covered the data); one figure legend each instead."""
     results = load_results(crafted_results(tmp_path / "results", params))
     for name in FIGURES:
-        fig = draw(name, results, params.figures, params.evaluate.pi_weight)
+        fig = draw(name, results, params.figures, params.evaluate)
         assert all(ax.get_legend() is None for ax in fig.axes), name
         assert len(fig.legends) == 1, name
 
@@ -111,7 +112,7 @@ def test_legends_sit_outside_the_axes(params, tmp_path):
 def test_rmse_axis_says_what_is_summed(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
     results.metrics["frames"] = 501  # metrics.csv's column: 10 s at 50 Hz, both ends
-    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     label = fig.axes[0].get_ylabel().replace("\n", " ")
     assert label == "total RMSE: sum of per-frame RMS over 501 frames"
     assert [ax.get_title() for ax in fig.axes] == [
@@ -122,17 +123,17 @@ def test_rmse_axis_says_what_is_summed(params, tmp_path):
 
 def test_contact_shading_and_reference_trace_are_visible(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    heights = FIGURES["foot_heights"](results, params.figures)
+    heights = FIGURES["foot_heights"](results, params.figures, params.evaluate)
     labels = [t.get_text() for t in heights.legends[0].get_texts()]
     assert labels == ["left", "right", "left in contact", "right in contact"]
-    tracking = FIGURES["joint_tracking"](results, params.figures, params.evaluate.pi_weight)
+    tracking = FIGURES["joint_tracking"](results, params.figures, params.evaluate)
     order = {line.get_label(): line.get_zorder() for line in tracking.axes[0].get_lines()}
     assert order["reference"] > order["measured"]  # the reference is drawn over the measured
 
 
 def test_foot_rotation_labels_do_not_collide(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["foot_rotations"](results, params.figures)
+    fig = FIGURES["foot_rotations"](results, params.figures, params.evaluate)
     assert [ax.get_ylabel() for ax in fig.axes] == ["", ""]
     assert [ax.get_title() for ax in fig.axes] == ["left foot", "right foot"]
 
@@ -151,7 +152,7 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
             file[key] = source[key][()]
         file["joints_measured"] = source["joints_reference"][()] + 0.05  # tracks worse
         file.attrs["joint_names"] = list(JOINT_NAMES)
-    fig = FIGURES["joint_tracking"](load_results(root), params.figures, params.evaluate.pi_weight)
+    fig = FIGURES["joint_tracking"](load_results(root), params.figures, params.evaluate)
     titles = [ax.get_title() for ax in fig.axes]
     assert len(titles) == 8 and titles[0].endswith(", offline") and titles[1].endswith(", online")
     assert "offline and online" in fig._suptitle.get_text()
@@ -166,13 +167,13 @@ def test_joint_tracking_sets_the_online_run_beside_the_offline_one(params, tmp_p
 
 def test_box_plot_draws_one_box_per_weight_at_the_seed_median(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["pi_weight_comparison"](results, params.figures)
+    fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     frame = results.metrics
-    unsteered = frame[(frame["scenario"] == params.figures.scenario) & ~frame["steering"]]
+    unsteered = frame[(frame["scenario"] == params.evaluate.scenario) & ~frame["steering"]]
     for ax, kind in zip(fig.axes, ("linear", "angular"), strict=True):
         medians = [line for line in ax.get_lines() if line.get_color() == "tab:orange"]
-        assert len(medians) == len(params.figures.box_weights) == len(ax.patches)
-        for line, weight in zip(medians, params.figures.box_weights, strict=True):
+        assert len(medians) == len(params.evaluate.box_weights) == len(ax.patches)
+        for line, weight in zip(medians, params.evaluate.box_weights, strict=True):
             model = unsteered["model"] == f"w{weight:g}"  # not the baseline (its w is 0 too)
             seeds = unsteered.loc[model, f"support_rmse_{kind}_total"]
             assert line.get_ydata()[0] == pytest.approx(np.median(seeds))
@@ -181,7 +182,7 @@ def test_box_plot_draws_one_box_per_weight_at_the_seed_median(params, tmp_path):
 
 def test_base_displacement_draws_three_axes_per_condition_from_the_time_series(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["base_displacement"](results, params.figures)
+    fig = FIGURES["base_displacement"](results, params.figures, params.evaluate)
     names = ("base_baseline", "base_pi", "base_pi_steering")
     assert len(fig.axes) == 2 * len(names)  # positions on top, orientations below
     top, bottom = fig.axes[: len(names)], fig.axes[len(names) :]
@@ -201,7 +202,7 @@ def test_base_displacement_draws_three_axes_per_condition_from_the_time_series(p
 
 def test_ground_projection_draws_each_conditions_path_and_the_desired_line(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    fig = FIGURES["ground_projection"](results, params.figures)
+    fig = FIGURES["ground_projection"](results, params.figures, params.evaluate)
     (ax,) = fig.axes
     paths = [line for line in ax.get_lines() if not line.get_label().startswith("_")]
     assert len(paths) == 4  # the desired direction and three conditions (end dots unlabelled)
@@ -216,7 +217,7 @@ def test_ground_projection_draws_each_conditions_path_and_the_desired_line(param
 
 def test_foot_figures_draw_degrees_and_centimetres_of_every_weight(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
-    rotations = FIGURES["foot_rotations"](results, params.figures)
+    rotations = FIGURES["foot_rotations"](results, params.figures, params.evaluate)
     feet = {w: results.timeseries[f"feet_w{w}"] for w in (0, 1, 10, 20, 100)}
     for ax, side in zip(rotations.axes, ("left", "right"), strict=True):
         lines = ax.get_lines()
@@ -226,8 +227,8 @@ def test_foot_figures_draw_degrees_and_centimetres_of_every_weight(params, tmp_p
     # the crafted pitch is 0.002 w rad: the drawn peaks grow with w, at most 0.2 rad = 11.5 deg
     peaks = [np.abs(line.get_ydata()).max() for line in rotations.axes[0].get_lines()]
     assert peaks == sorted(peaks) and 11.0 < peaks[-1] <= np.degrees(0.2)
-    heights = FIGURES["foot_heights"](results, params.figures)
-    weights = [float(w) for w in params.figures.foot_height_weights]
+    heights = FIGURES["foot_heights"](results, params.figures, params.evaluate)
+    weights = [float(w) for w in params.evaluate.foot_height_weights]
     assert [ax.get_title() for ax in heights.axes] == [f"$w$={w:g}" for w in weights]
     for ax, weight in zip(heights.axes, weights, strict=True):
         table = results.timeseries[f"feet_w{weight:g}"]

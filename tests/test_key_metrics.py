@@ -55,9 +55,7 @@ def test_key_metrics_are_flat_and_few(params, results, tmp_path):
 
 def test_key_metrics_values(params, results):
     metrics = key_metrics(results, params)
-    claims = evaluate_claims(
-        read_metrics(results / "metrics.csv"), params.figures, params.evaluate.pi_weight
-    )
+    claims = evaluate_claims(read_metrics(results / "metrics.csv"), params.evaluate)
     assert metrics["claims.total"] == len(claims) == 14
     assert metrics["claims.holding"] == sum(c.status == HOLDS for c in claims) > 0
     for claim in claims:

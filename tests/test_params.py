@@ -85,7 +85,13 @@ def _set(raw: dict, dotted: str, value) -> None:
         ("simulate.runs.0.model", "w7", r"simulate.runs.0.model: unknown 'w7'; known: w0, w1"),
         ("simulate.runs.0.seed", 9, r"simulate.runs.0.seed: unknown 9"),
         ("evaluate.pi_weight", 7, r"evaluate.pi_weight: unknown 7.0; known: 0.0, 1.0"),
-        ("figures.box_weights.1", 3, r"figures.box_weights.1: unknown 3.0"),
+        ("evaluate.box_weights.1", 3, r"evaluate.box_weights.1: unknown 3.0; known: 0.0, 1.0"),
+        ("evaluate.foot_height_weights.0", 5, r"evaluate.foot_height_weights.0: unknown 5.0"),
+        ("evaluate.large_weight", 50, r"evaluate.large_weight: unknown 50.0; known: 0.0, 1.0"),
+        ("evaluate.scenario", "jog", r"evaluate.scenario: unknown 'jog'; known: forward"),
+        ("evaluate.drift_reduction", -1, r"evaluate.drift_reduction must be in \(0, 1\], not -1"),
+        ("evaluate.drift_reduction", 1.5, r"evaluate.drift_reduction must be in \(0, 1\], not 1.5"),
+        ("evaluate.foot_steering", "maybe", r"evaluate.foot_steering must be bool"),
         ("contacts.off_height", 0.01, r"contacts.off_height must be >= contacts.on_height"),
         ("contacts.switch_time", -0.1, r"contacts.switch_time must be >= 0, not -0.1"),
         ("train.seeds", [0, 0], r"train.seeds must be a non-empty list without repeats"),
@@ -160,6 +166,26 @@ def test_a_bad_profile_value_names_the_profile(tmp_path, raw):
     raw["profiles"]["quick"]["train.epochs"] = 70
     raw["profiles"]["quick"]["evaluate.pi_weight"] = 3  # a cross-reference, merged
     with pytest.raises(PimannError, match=r"evaluate.pi_weight: unknown 3.*\(profile quick\)"):
+        load_params(_write(tmp_path, raw))
+
+
+def test_what_evaluate_selects_for_the_figures_and_claims_loads_under_evaluate():
+    """evaluate's choices for the figures and claims (the scenario, the weights compared, the
+    foot rollouts, the drift factor) load from its own section in either profile; figures keeps
+    the style alone."""
+    selection = {"scenario": "forward", "box_weights": [0.0, 1.0, 10.0, 20.0],
+                 "large_weight": 100.0, "foot_height_weights": [0.0, 10.0],
+                 "foot_steering": False, "drift_reduction": 0.5}  # fmt: skip
+    for profile in ("quick", "paper"):
+        params = load_params(profile=profile)
+        assert {key: getattr(params.evaluate, key) for key in selection} == selection, profile
+        assert params.evaluate.pi_weight == 10.0
+        assert set(vars(params.figures)) == {"width_in", "font_pt", "dpi"}
+
+
+def test_a_moved_key_in_the_old_section_is_named(tmp_path, raw):
+    raw["figures"]["scenario"] = raw["evaluate"].pop("scenario")
+    with pytest.raises(PimannError, match=r"unknown key 'figures\.scenario'"):
         load_params(_write(tmp_path, raw))
 
 

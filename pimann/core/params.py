@@ -281,9 +281,19 @@ class ContactParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class EvaluateParams:
-    """evaluate: metrics (paper Sec. IV), and the PI model the claims and figures feature."""
+    """evaluate: metrics (paper Sec. IV), and what the claims and figures feature: the PI
+    model, the scenario, the weights compared."""
 
     pi_weight: Float  # the PI model of the drift figures and the steering claims
+    # what evaluate selects for the paper's figures and claims
+    scenario: Str  # rollout scenario of the paper's test (10 s forward walking)
+    box_weights: list[Float]  # weights in the RMSE box plots and the "all w" claims
+    large_weight: Float  # the weight said to fail unsteered and to pitch the feet
+    foot_height_weights: list[Float]  # the two models of the foot-height figure
+    foot_steering: Bool  # foot figures and claims from steered (True) or unsteered rollouts
+    drift_reduction: Annotated[
+        Float, Field(gt=0, le=1)
+    ]  # steering "removes" drift when it cuts the median by this factor
     skating_height: Positive  # m, foot-skating: foot below this in two adjacent frames ...
     skating_speed_per_frame: Positive  # m, ... moving more than this per frame ...
     skating_rate_hz: Positive  # ... at this frame rate
@@ -420,16 +430,8 @@ class SimulateParams:
 
 @dataclass(frozen=True, config=CONFIG)
 class FiguresParams:
-    """figures: what evaluate selects for the paper's figures and claims, and the style."""
+    """figures: the figures' style (what they show: evaluate)."""
 
-    scenario: Str  # rollout scenario of the paper's test (10 s forward walking)
-    box_weights: list[Float]  # weights in the RMSE box plots and the "all w" claims
-    large_weight: Float  # the weight said to fail unsteered and to pitch the feet
-    foot_height_weights: list[Float]  # the two models of the foot-height figure
-    foot_steering: Bool  # foot figures and claims from steered (True) or unsteered rollouts
-    drift_reduction: Annotated[
-        Float, Field(gt=0, le=1)
-    ]  # steering "removes" drift when it cuts the median by this factor
     width_in: Positive  # figure width, inches
     font_pt: Positive
     dpi: Annotated[Int, Field(ge=50)]  # PNG resolution
@@ -485,17 +487,16 @@ def _check_references(params: Params) -> None:
         if name not in params.rollout.scenarios:
             raise _unknown(f"rollout.scenario_names.{k}", name, scenarios)
     rolled_out = params.rollout.scenario_names
-    figures, weights = params.figures, params.train.pi_weights
-    if figures.scenario not in rolled_out:
-        raise _unknown("figures.scenario", figures.scenario, rolled_out)
-    if params.evaluate.pi_weight not in weights:
-        raise _unknown("evaluate.pi_weight", params.evaluate.pi_weight, weights)
-    if figures.large_weight not in weights:
-        raise _unknown("figures.large_weight", figures.large_weight, weights)
+    evaluate, weights = params.evaluate, params.train.pi_weights
+    if evaluate.scenario not in rolled_out:
+        raise _unknown("evaluate.scenario", evaluate.scenario, rolled_out)
+    for key in ("pi_weight", "large_weight"):
+        if getattr(evaluate, key) not in weights:
+            raise _unknown(f"evaluate.{key}", getattr(evaluate, key), weights)
     for key in ("box_weights", "foot_height_weights"):
-        for k, weight in enumerate(getattr(figures, key)):
+        for k, weight in enumerate(getattr(evaluate, key)):
             if weight not in weights:
-                raise _unknown(f"figures.{key}.{k}", weight, weights)
+                raise _unknown(f"evaluate.{key}.{k}", weight, weights)
     runs = {"simulate.pushes.rollouts": params.simulate.pushes.rollouts,
             "simulate.runs": params.simulate.runs}  # fmt: skip
     for where, items in runs.items():

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pimann.core.params import FiguresParams
+from pimann.core.params import EvaluateParams
 from pimann.evaluate.data_reference import reference_value
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
 from pimann.generate.rollout_layout import BASELINE, pi_models, select_rows, weight_label
@@ -269,34 +269,32 @@ def _header_provenance(provenance: dict[str, Any]) -> dict[str, Any]:
 
 
 def evaluate_claims(
-    frame: pd.DataFrame,
-    figures: FiguresParams,
-    pi_weight: float,
-    representation: str = "local_world_aligned",
-    pi_gradient: str = "both",
+    frame: pd.DataFrame, evaluate: EvaluateParams, pi_gradient: str = "both"
 ) -> list[Claim]:
     """Each claim of the paper's Sec. IV against our metrics, by the `RULES`.
 
-    `pi_weight`: evaluate.pi_weight, the featured PI model (drift and steering claims);
-    `representation`: evaluate.foot_velocity_frame, the linear part of the sliding columns.
+    `evaluate`: on evaluate.scenario, the featured PI model evaluate.pi_weight (drift and
+    steering claims), the weights compared (box_weights, large_weight, foot_height_weights),
+    the linear part of the sliding columns in evaluate.foot_velocity_frame;
+    `pi_gradient`: train.pi_gradient (C9's reason).
     """
-    if frame.empty or not (frame["scenario"] == figures.scenario).any():
+    if frame.empty or not (frame["scenario"] == evaluate.scenario).any():
         return [
-            Claim("C0", "any", "-", "-", "n/a", NOT_COMPARABLE, f"no {figures.scenario} rollouts")
+            Claim("C0", "any", "-", "-", "n/a", NOT_COMPARABLE, f"no {evaluate.scenario} rollouts")
         ]
-    data = SeedData(frame, figures.scenario, representation)
+    data = SeedData(frame, evaluate.scenario, evaluate.foot_velocity_frame)
     return [
         _baseline_magnitude(data),
-        *(_lower_than_baseline(data, figures, kind) for kind in ("linear", "angular")),
-        _especially_angular(data, figures),
-        _decreasing_up_to(data, figures, pi_weight),
-        _compared_walk(data, figures),
-        *(_large_weight_walks(data, figures, steering) for steering in (False, True)),
-        _foot_pitch_grows(data, figures, pi_gradient),
-        *(_steering_removes(data, figures, pi_weight, axis) for axis in ("y", "yaw")),
-        _pi_drifts_more(data, figures, pi_weight),
-        _steered_beats_baseline(data, figures, pi_weight),
-        _pi_reduces_foot_motion(data, figures),
+        *(_lower_than_baseline(data, evaluate, kind) for kind in ("linear", "angular")),
+        _especially_angular(data, evaluate),
+        _decreasing_up_to(data, evaluate),
+        _compared_walk(data, evaluate),
+        *(_large_weight_walks(data, evaluate, steering) for steering in (False, True)),
+        _foot_pitch_grows(data, evaluate, pi_gradient),
+        *(_steering_removes(data, evaluate, axis) for axis in ("y", "yaw")),
+        _pi_drifts_more(data, evaluate),
+        _steered_beats_baseline(data, evaluate),
+        _pi_reduces_foot_motion(data, evaluate),
     ]
 
 
@@ -332,8 +330,8 @@ def _baseline_magnitude(data: SeedData) -> Claim:
     return stands_still(data, claim, [(BASELINE, False)])
 
 
-def _lower_than_baseline(data: SeedData, figures: FiguresParams, kind: str) -> Claim:
-    weights = figures.box_weights
+def _lower_than_baseline(data: SeedData, evaluate: EvaluateParams, kind: str) -> Claim:
+    weights = evaluate.box_weights
     claim = Claim(
         "C2" if kind == "linear" else "C3",
         f"PI models slide less than the baseline ({kind} total RMSE) for all w in "
@@ -370,13 +368,13 @@ def _reduction(data: SeedData, weights: Sequence[float], kind: str) -> float | N
     return float(np.mean([1.0 - v / baseline for v in medians]))
 
 
-def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
+def _especially_angular(data: SeedData, evaluate: EvaluateParams) -> Claim:
     claim = Claim(
         "C4", "The reduction is largest for the angular velocities",
         "Sec. IV-A, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
     )  # fmt: skip
-    linear = _reduction(data, figures.box_weights, "linear")
-    angular = _reduction(data, figures.box_weights, "angular")
+    linear = _reduction(data, evaluate.box_weights, "linear")
+    angular = _reduction(data, evaluate.box_weights, "angular")
     if linear is None or angular is None:
         return missing(claim, "the baseline or a weight")
     if linear <= 0 or angular <= 0:
@@ -384,7 +382,7 @@ def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
             FAILS,
             "no reduction in "
             + " and ".join(k for k, r in (("linear", linear), ("angular", angular)) if r <= 0)
-            + (velocity_level_cause(data, figures.box_weights) if linear <= 0 else ""),
+            + (velocity_level_cause(data, evaluate.box_weights) if linear <= 0 else ""),
         )
     elif angular > linear:
         status, reason = HOLDS, "both reduced, angular more"
@@ -395,11 +393,12 @@ def _especially_angular(data: SeedData, figures: FiguresParams) -> Claim:
         ours=f"mean relative reduction of the seed medians vs baseline: linear {linear:.0%}, "
         f"angular {angular:.0%}",
     )  # fmt: skip
-    return stands_still(data, claim, [(data.model(w), False) for w in figures.box_weights])
+    return stands_still(data, claim, [(data.model(w), False) for w in evaluate.box_weights])
 
 
-def _decreasing_up_to(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
-    weights = sorted(w for w in figures.box_weights if w <= pi_weight)
+def _decreasing_up_to(data: SeedData, evaluate: EvaluateParams) -> Claim:
+    pi_weight = evaluate.pi_weight
+    weights = sorted(w for w in evaluate.box_weights if w <= pi_weight)
     claim = Claim(
         "C5", f"Sliding decreases as w grows up to w={weight_label(pi_weight)}",
         "Sec. IV-C2, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
@@ -431,8 +430,8 @@ WALK_METRIC = (
 )
 
 
-def _compared_walk(data: SeedData, figures: FiguresParams) -> Claim:
-    weights = figures.box_weights
+def _compared_walk(data: SeedData, evaluate: EvaluateParams) -> Claim:
+    weights = evaluate.box_weights
     claim = Claim(
         "C6", "Models with w in the comparison walk without steering (implied)",
         "Sec. IV-C2 (only w=100 is said not to walk)", "base_displacement", metric=WALK_METRIC,
@@ -452,14 +451,14 @@ def _compared_walk(data: SeedData, figures: FiguresParams) -> Claim:
     )
 
 
-def _large_weight_walks(data: SeedData, figures: FiguresParams, steering: bool) -> Claim:
-    w = weight_label(figures.large_weight)
+def _large_weight_walks(data: SeedData, evaluate: EvaluateParams, steering: bool) -> Claim:
+    w = weight_label(evaluate.large_weight)
     claim = Claim(
         "C8" if steering else "C7",
         f"w={w} models {'walk with' if steering else 'cannot walk without'} steering",
         "Sec. IV-C2", "base_displacement", metric=WALK_METRIC,
     )  # fmt: skip
-    fraction = data.walk_fraction(figures.large_weight, steering)
+    fraction = data.walk_fraction(evaluate.large_weight, steering)
     if fraction is None:
         return missing(claim, f"w={w}")
     holds = fraction == 1.0 if steering else fraction == 0.0
@@ -473,14 +472,14 @@ def _large_weight_walks(data: SeedData, figures: FiguresParams, steering: bool) 
     )
 
 
-def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) -> Claim:
+def _foot_pitch_grows(data: SeedData, evaluate: EvaluateParams, pi_gradient: str) -> Claim:
     claim = Claim(
         "C9", "Foot pitch in contact grows with w (heel-only stance at large w)",
         "Sec. IV-C2, Fig. foot_rotations", "foot_rotations",
         metric="max |sole pitch| in contact (poses)",
     )  # fmt: skip
     metric = "contact_sole_pitch_max_abs"
-    values = {w: data.values(data.model(w), figures.foot_steering, metric) for w in data.models}
+    values = {w: data.values(data.model(w), evaluate.foot_steering, metric) for w in data.models}
     values = {w: v for w, v in sorted(values.items()) if len(v)}
     if len(values) < 3:
         return missing(claim, "three weights or more")
@@ -495,7 +494,7 @@ def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) 
         status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)"
     )  # fmt: skip
     if status == FAILS:  # a weight whose rollouts stand keeps its feet flat: name it
-        walking = {w: data.walk_fraction(w, figures.foot_steering) for w in values}
+        walking = {w: data.walk_fraction(w, evaluate.foot_steering) for w in values}
         standing = [f"w={weight_label(w)} ({f:.0%} of seeds walk)"
                     for w, f in walking.items() if f is not None and f < 1.0]  # fmt: skip
         if standing:
@@ -511,7 +510,8 @@ def _foot_pitch_grows(data: SeedData, figures: FiguresParams, pi_gradient: str) 
 DRIFT_METRIC = "max |lateral| / |yaw| drift of the base (poses)"
 
 
-def _steering_removes(data: SeedData, figures: FiguresParams, pi_weight: float, axis: str) -> Claim:
+def _steering_removes(data: SeedData, evaluate: EvaluateParams, axis: str) -> Claim:
+    pi_weight = evaluate.pi_weight
     metric = f"drift_{axis}_max_abs"
     model = data.model(pi_weight)
     claim = Claim(
@@ -523,20 +523,21 @@ def _steering_removes(data: SeedData, figures: FiguresParams, pi_weight: float, 
     free, steered = data.values(model, False, metric), data.values(model, True, metric)
     if not len(free) or not len(steered):
         return missing(claim, f"w={weight_label(pi_weight)} with and without steering")
-    status = order(steered, figures.drift_reduction * free)
+    status = order(steered, evaluate.drift_reduction * free)
     unit = "m" if axis == "y" else "rad"
     claim = dataclasses.replace(
         claim, status=status,
         ours=f"w={weight_label(pi_weight)} max |{axis}| ({unit}): {span(free)} "
         f"without, {span(steered)} with steering",
         reason=f"steered {'seeds' if status == HOLDS else 'median'} "
-        f"{'above' if status == FAILS else 'below'} {figures.drift_reduction:g} x the unsteered "
+        f"{'above' if status == FAILS else 'below'} {evaluate.drift_reduction:g} x the unsteered "
         + ("seeds" if status == HOLDS else "median"),
     )  # fmt: skip
     return stands_still(data, claim, [(model, True)])
 
 
-def _drift_pairs(data: SeedData, figures: FiguresParams, pi_weight: float, steering: bool):
+def _drift_pairs(data: SeedData, evaluate: EvaluateParams, steering: bool):
+    pi_weight = evaluate.pi_weight
     model = data.model(pi_weight)
     return {
         axis: (data.values(BASELINE, False, f"drift_{axis}_max_abs"),
@@ -558,13 +559,14 @@ def _drift_claim(claim: Claim, pairs, label: str, orders: dict[str, str], word: 
     )  # fmt: skip
 
 
-def _pi_drifts_more(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+def _pi_drifts_more(data: SeedData, evaluate: EvaluateParams) -> Claim:
+    pi_weight = evaluate.pi_weight
     claim = Claim(
         "C12", "Without steering the PI model drifts more than the baseline",
         "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (b)", "base_displacement",
         metric=DRIFT_METRIC,
     )  # fmt: skip
-    pairs = _drift_pairs(data, figures, pi_weight, False)
+    pairs = _drift_pairs(data, evaluate, False)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the PI model")
     orders = {a: order(b, p) for a, (b, p) in pairs.items()}
@@ -574,13 +576,14 @@ def _pi_drifts_more(data: SeedData, figures: FiguresParams, pi_weight: float) ->
     )
 
 
-def _steered_beats_baseline(data: SeedData, figures: FiguresParams, pi_weight: float) -> Claim:
+def _steered_beats_baseline(data: SeedData, evaluate: EvaluateParams) -> Claim:
+    pi_weight = evaluate.pi_weight
     claim = Claim(
         "C13", "With steering the PI model deviates less from the walking direction than the "
         "baseline", "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (c)",
         "base_displacement", metric=DRIFT_METRIC,
     )  # fmt: skip
-    pairs = _drift_pairs(data, figures, pi_weight, True)
+    pairs = _drift_pairs(data, evaluate, True)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the steered PI model")
     orders = {a: order(p, b) for a, (b, p) in pairs.items()}
@@ -589,15 +592,15 @@ def _steered_beats_baseline(data: SeedData, figures: FiguresParams, pi_weight: f
     return stands_still(data, claim, [(data.model(pi_weight), True)])
 
 
-def _pi_reduces_foot_motion(data: SeedData, figures: FiguresParams) -> Claim:
-    low, high = sorted(figures.foot_height_weights)[:1] + sorted(figures.foot_height_weights)[-1:]
+def _pi_reduces_foot_motion(data: SeedData, evaluate: EvaluateParams) -> Claim:
+    low, high = sorted(evaluate.foot_height_weights)[:1] + sorted(evaluate.foot_height_weights)[-1:]
     claim = Claim(
         "C14", f"The PI loss (w={weight_label(high)}) reduces support-foot motion against "
         f"w={weight_label(low)}",
         "Sec. IV-C2, Fig. pi_ablation_foot_z_plot", "foot_heights",
         metric="position-level contact-foot speed (m/s); skating ratio beside",
     )  # fmt: skip
-    steering = figures.foot_steering
+    steering = evaluate.foot_steering
     models = [data.model(w) for w in (low, high)]
     speed = [data.values(m, steering, "contact_foot_speed_mean_position") for m in models]
     skate = [data.median(m, steering, "skating_ratio") for m in models]

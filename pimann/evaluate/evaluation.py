@@ -26,7 +26,7 @@ import pandas as pd
 
 from pimann.core.atomic import atomic_path, write_text_atomic
 from pimann.core.parallel import pool_map
-from pimann.core.params import FiguresParams, Params, as_dict
+from pimann.core.params import EvaluateParams, Params, as_dict
 from pimann.core.paths import REPO_ROOT
 from pimann.core.progress import track
 from pimann.evaluate.claims import (
@@ -164,26 +164,24 @@ def representative_seed(
     return int(rows.assign(_d=distance).sort_values(["_d", "seed"])["seed"].iloc[0])
 
 
-def timeseries_selection(
-    frame: pd.DataFrame, figures: FiguresParams, pi_weight: float
-) -> dict[str, RolloutKey]:
+def timeseries_selection(frame: pd.DataFrame, evaluate: EvaluateParams) -> dict[str, RolloutKey]:
     """{csv name: rollout} of the figures' time series: drift (3 conditions), feet per w."""
-    scenario = figures.scenario
+    scenario = evaluate.scenario
     models = pi_models(frame)
     chosen: dict[str, RolloutKey] = {}
     seed = representative_seed(frame, BASELINE, scenario, False)
     if seed is not None:
         chosen["base_baseline"] = RolloutKey(BASELINE, seed, scenario, False)
-    focus = models.get(float(pi_weight))
+    focus = models.get(float(evaluate.pi_weight))
     seed = None if focus is None else representative_seed(frame, focus, scenario, False)
     if seed is not None:
         chosen["base_pi"] = RolloutKey(focus, seed, scenario, False)
         if not select_rows(frame, scenario, True, model=focus, seed=seed).empty:
             chosen["base_pi_steering"] = RolloutKey(focus, seed, scenario, True)
     for weight, model in models.items():
-        seed = representative_seed(frame, model, scenario, figures.foot_steering)
+        seed = representative_seed(frame, model, scenario, evaluate.foot_steering)
         if seed is not None:
-            key = RolloutKey(model, seed, scenario, figures.foot_steering)
+            key = RolloutKey(model, seed, scenario, evaluate.foot_steering)
             chosen[f"feet_w{weight_label(weight)}"] = key
     return chosen
 
@@ -238,7 +236,7 @@ def provenance(params: Params, rollouts_dir: str | Path | None = None) -> dict[s
         "max_takes": {name: source.max_takes for name, source in params.data.sources.items()},
         "seeds": seeds or list(params.train.seeds),  # those rolled out, else the params'
         "pi_weights": list(params.train.pi_weights),
-        "scenario": params.figures.scenario,
+        "scenario": params.evaluate.scenario,
         "params": {
             name: as_dict(getattr(params, name))
             for name in ("rollout", "contacts", "evaluate", "figures")
@@ -265,13 +263,7 @@ def write_results(
     tidy = frame.assign(profile=info.get("profile"), epochs=info.get("epochs"))
     with atomic_path(results_dir / "metrics.csv") as tmp:
         tidy.to_csv(tmp, index=False, float_format="%.6g")
-    claims = evaluate_claims(
-        frame,
-        params.figures,
-        params.evaluate.pi_weight,
-        params.evaluate.foot_velocity_frame,
-        params.train.pi_gradient,
-    )
+    claims = evaluate_claims(frame, params.evaluate, params.train.pi_gradient)
     summary = {
         "provenance": info,
         "timeseries": {name: dataclasses.asdict(key) for name, key in (timeseries or {}).items()},
@@ -303,7 +295,7 @@ def evaluate_all(
     from pimann.evaluate.following import collect_following, write_following
 
     frame = collect_metrics(rollouts_dir, params, workers)
-    selection = timeseries_selection(frame, params.figures, params.evaluate.pi_weight)
+    selection = timeseries_selection(frame, params.evaluate)
     write_timeseries(rollouts_dir, Path(results_dir) / "timeseries", selection, params)
     name = params.features.input if data is None else data
     reference = data_reference(REPO_ROOT / name, params, workers, str(name))

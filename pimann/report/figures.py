@@ -23,7 +23,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from pimann.core.params import FiguresParams
+from pimann.core.params import EvaluateParams, FiguresParams
 from pimann.core.robot import JOINT_NAMES
 from pimann.evaluate.figure_style import (
     BASELINE_COLOUR,
@@ -58,19 +58,21 @@ TRACKED_JOINTS = ("torso_yaw", "neck_yaw", "l_shoulder_pitch", "r_elbow")
 # ----------------------------------------------------------------------------- the figures
 
 
-def fig_pi_weight_comparison(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_pi_weight_comparison(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. pi_weight_comparison_plot: support-foot RMSE per w (boxes over seeds), baseline line.
 
     Unsteered forward walking as in the paper; medians orange, means black diamonds; the
     retargeted data's own level (forward walking, metrics_summary.json) as a line, "data".
     """
     frame = results.metrics
-    frame = frame[(frame["scenario"] == figures.scenario) & ~frame["steering"]]
+    frame = frame[(frame["scenario"] == evaluate.scenario) & ~frame["steering"]]
     models = pi_models(frame)
-    weights = [w for w in figures.box_weights if float(w) in models]
+    weights = [w for w in evaluate.box_weights if float(w) in models]
     if not weights:
         log.info(
-            "pi_weight_comparison: no %s rollouts of %s", figures.scenario, figures.box_weights
+            "pi_weight_comparison: no %s rollouts of %s", evaluate.scenario, evaluate.box_weights
         )
         return None
     colours = weight_colours(results.weights)
@@ -126,7 +128,9 @@ def _condition_title(results: Results, name: str) -> str:
     return title if name == "base_baseline" or weight is None else f"{title} ($w$={weight:g})"
 
 
-def fig_base_displacement(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_base_displacement(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. base_displacement_pid_ablation: base x y z (top) and roll pitch yaw (bottom) vs time."""
     series = _base_series(results)
     if not series:
@@ -149,7 +153,9 @@ def fig_base_displacement(results: Results, figures: FiguresParams) -> Figure | 
     return fig
 
 
-def fig_ground_projection(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_ground_projection(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. ground_projection: base path on the ground for the three conditions."""
     series = _base_series(results)
     if not series:
@@ -178,7 +184,9 @@ def _feet_series(results: Results) -> dict[float, pd.DataFrame]:
     )
 
 
-def fig_foot_rotations(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_foot_rotations(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. foot_rotations: left and right sole pitch vs time, one line per w."""
     feet = _feet_series(results)
     if not feet:
@@ -198,12 +206,14 @@ def fig_foot_rotations(results: Results, figures: FiguresParams) -> Figure | Non
     return fig
 
 
-def fig_foot_heights(results: Results, figures: FiguresParams) -> Figure | None:
+def fig_foot_heights(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. pi_ablation_foot_z_plot: foot heights for w=0 (top) and w=10 (bottom)."""
     feet = _feet_series(results)
-    weights = [float(w) for w in figures.foot_height_weights if float(w) in feet]
+    weights = [float(w) for w in evaluate.foot_height_weights if float(w) in feet]
     if not weights:
-        log.info("foot_heights: no feet time series for w in %s", figures.foot_height_weights)
+        log.info("foot_heights: no feet time series for w in %s", evaluate.foot_height_weights)
         return None
     fig, axes = new_figure(figures, 1.2 + 1.0 * len(weights), len(weights), 1, sharex=True,
                         sharey=True, squeeze=False)  # fmt: skip
@@ -246,7 +256,9 @@ def _read_sim(path: Path) -> dict[str, np.ndarray] | None:
     return out
 
 
-def fig_joint_tracking(results: Results, figures: FiguresParams, pi_weight: float) -> Figure | None:
+def fig_joint_tracking(
+    results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
     """Fig. joint_plots: selected upper-body joints, generated / reference / measured, in sim."""
     files = sorted((results.root / "sim").glob("*.h5")) + sorted(
         (results.root / "sim").glob("*.csv")
@@ -258,7 +270,7 @@ def fig_joint_tracking(results: Results, figures: FiguresParams, pi_weight: floa
     # the paper's run: the featured PI model's steered mixed scenario, else any mixed run,
     # under the offline controller; its online twin (`<name>-online`) beside it if there is one
     offline = [(p, d) for p, d in runs if not p.stem.endswith("-online")] or runs
-    featured = f"w{pi_weight:g}-"
+    featured = f"w{evaluate.pi_weight:g}-"
     mixed = [(p, d) for p, d in offline if "mixed" in p.stem]
     path, data = next(
         (
@@ -302,7 +314,9 @@ def fig_joint_tracking(results: Results, figures: FiguresParams, pi_weight: floa
     return fig
 
 
-# (results, figures[, pi_weight]): the joint-tracking figure shows the featured PI model's run
+# (results, figures: the style, evaluate: what they show): the pi_weight_comparison figure on
+# evaluate.scenario and box_weights, the foot heights of foot_height_weights, the joint-tracking
+# figure the featured PI model's run (evaluate.pi_weight)
 FIGURES: dict[str, Callable[..., Figure | None]] = {
     "pi_weight_comparison": fig_pi_weight_comparison,
     "base_displacement": fig_base_displacement,
@@ -313,23 +327,24 @@ FIGURES: dict[str, Callable[..., Figure | None]] = {
 }
 
 
-def draw(name: str, results: Results, figures: FiguresParams, pi_weight: float) -> Figure | None:
-    """The figure `name` of FIGURES; the joint-tracking one shows the featured PI model's run
-    (`pi_weight`: evaluate.pi_weight)."""
-    extra = {"pi_weight": pi_weight} if name == "joint_tracking" else {}
-    return FIGURES[name](results, figures, **extra)
+def draw(
+    name: str, results: Results, figures: FiguresParams, evaluate: EvaluateParams
+) -> Figure | None:
+    """The figure `name` of FIGURES, in the style `figures`, showing what `evaluate` selects."""
+    return FIGURES[name](results, figures, evaluate)
 
 
 def make_figures(
-    results_dir: str | Path, out_dir: str | Path, figures: FiguresParams, pi_weight: float
+    results_dir: str | Path, out_dir: str | Path, figures: FiguresParams, evaluate: EvaluateParams
 ) -> dict[str, list[Path]]:
     """Every figure whose data exists under `results_dir`, into `out_dir` as PDF and PNG;
-    `pi_weight`: the featured PI model (evaluate.pi_weight)."""
+    `figures`: the style, `evaluate`: what they show (scenario, weights, the featured PI
+    model)."""
     results = load_results(results_dir)
     written: dict[str, list[Path]] = {}
     with matplotlib.rc_context(style(figures)):
         for name in FIGURES:
-            fig = draw(name, results, figures, pi_weight)
+            fig = draw(name, results, figures, evaluate)
             if fig is None:
                 continue
             written[name] = save_figure(fig, out_dir, name, results.provenance)

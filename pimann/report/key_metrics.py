@@ -10,7 +10,7 @@ and stable from run to run (a value that cannot be had is null):
 - `claims.holding`, `claims.total`, `claim.<id>`: each claim's status as a number
   (`STATUS_CODES`: 1 holds, 0.5 within seed spread, 0.25 holds only with a model standing
   still, 0 does not hold, -1 not comparable);
-- `<scenario>.<model>.<metric>`: medians over the seeds, unsteered, on figures.scenario (the
+- `<scenario>.<model>.<metric>`: medians over the seeds, unsteered, on evaluate.scenario (the
   paper's forward walk): sliding (support-foot total RMSE, linear and angular) and the share
   of seeds that walk; and the base drift (max |y|, max |yaw|) of the baseline and the featured
   PI model (evaluate.pi_weight), unsteered and steered;
@@ -85,8 +85,8 @@ def claim_metrics(statuses: dict[str, str]) -> dict[str, Number]:
 
 
 def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
-    """Medians per model of the headline metrics on figures.scenario, and the drifts."""
-    scenario = params.figures.scenario
+    """Medians per model of the headline metrics on evaluate.scenario, and the drifts."""
+    scenario = params.evaluate.scenario
     models = [BASELINE, *pi_models(frame).values()] if len(frame) else []
     out: dict[str, Number] = {}
     for model in models:
