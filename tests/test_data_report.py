@@ -241,3 +241,18 @@ def test_clips_without_dataset_attr_are_all(params):
     summary = dr.summarise(frames)
     assert summary["sliding"]["file_contacts"] is None  # no flags in the file
     assert summary["l_b"]["data_contacts"]["samples"] == 0
+
+
+def test_data_report_stage_tracks_only_the_metric_keys_it_reads() -> None:
+    """dvc.yaml's data_report params name exactly the evaluate keys the report records, and
+    each is a field of the evaluate section, so editing what the claims feature never reruns it."""
+    import yaml
+
+    from pimann.core.params import load_params
+    from pimann.core.paths import PACKAGE_CHECKOUT
+
+    stages = yaml.safe_load((PACKAGE_CHECKOUT / "dvc.yaml").read_text())["stages"]
+    listed = [p for p in stages["data_report"]["params"] if str(p).startswith("evaluate")]
+    assert listed == [f"evaluate.{key}" for key in dr.METRIC_KEYS]
+    evaluate = load_params(PACKAGE_CHECKOUT / "params.yaml").evaluate
+    assert all(hasattr(evaluate, key) for key in dr.METRIC_KEYS)

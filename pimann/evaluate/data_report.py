@@ -79,6 +79,12 @@ GLIDE_TARGET = 0.1  # m/s, what the 95th percentile of a down corner's speed sho
 GLIDE_PERCENTILE = 95.0
 
 RULES = ("evaluate_rule", "file_contacts")
+# the evaluate section's keys the foot metrics read (dvc.yaml lists these for the stage, so
+# what the claims and figures feature never reruns the data report)
+METRIC_KEYS = (
+    "skating_height", "skating_speed_per_frame", "skating_rate_hz", "walk_distance",
+    "foot_velocity_frame",
+)  # fmt: skip
 ALL = "all"  # the source of clips without a `dataset` attribute
 TOTAL = "total"
 CORNER_COLUMNS = tuple(f"glide_{f}{c}" for f in "lr" for c in range(len(SOLE_CORNERS)))
@@ -336,7 +342,7 @@ def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -
         "params": {
             "data": as_dict(params.data),
             "contacts": as_dict(params.contacts),
-            "evaluate": as_dict(params.evaluate),
+            "evaluate": {key: getattr(params.evaluate, key) for key in METRIC_KEYS},
             "features": {
                 "window": params.features.window,
                 "contact_margin_s": params.features.contact_margin_s,
