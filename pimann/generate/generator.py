@@ -25,18 +25,21 @@ One network step per frame (50 Hz) from the standing configuration, driven by a 
    the support point stays put. Contacts: the Schmitt trigger (core.contacts) on each foot's lowest
    corner height, both feet in contact at the start.
 
-Goal rule (authors' values k0 = 0.2, k1 = 2.0, goal factor 2.5, radius 0.3 m). When a motion
+Goal rule (authors' values k0 = 0.2, k1 = 2.0, goal factor 2.5, radius 0.3 m; the defaults
+here k1 = 4.0 and goal factor 0.25, docs/departures.md). When a motion
 command starts, the desired heading R_d takes the base's current yaw (standing roll and pitch)
 and a commanded path starts at the base; while the command holds, yaw_d += yaw_rate dt and the
 goal p_d is the path's current point, which advances (`rollout.held_command`)
-- `progress` (default): along the commanded direction by as much as the robot itself went, so
-  steering corrects the lateral and heading drift and leaves the speed to the network
-  (`goal_factor` is not used);
-- `carrot`: at the commanded velocity, the goal `goal_factor` x the commanded displacement over
-  the output window (v x 1.2 s) ahead of it -- the authors' goal at the command change, kept
-  ahead while the command holds (a held joystick). Its constant pull k0 x goal_factor x v x
-  1.2 s (+60% of v) drives a network out of its training range (a quick-profile model stalled
-  at 0.8 m/s with it and walked 6.7 m in 10 s without it), hence not the default.
+- `carrot` (default, the authors' goal kept ahead while the command holds, a held joystick):
+  the path's point moves at the commanded velocity and the goal is `goal_factor` x the
+  commanded displacement over the output window (v x 1.2 s) ahead of it. Its pull
+  k0 x goal_factor x v x 1.2 s (+6% of v at the default 0.25) and the lag the robot builds up
+  behind the moving point make a network that walks slower than commanded catch up;
+  the authors' 2.5 (+60%) overshoots backward. The legs carry the base (leg odometry below), so the
+  speed a rollout reaches is the legs' own, not the steering's;
+- `progress`: along the commanded direction by as much as the robot itself went, so steering
+  corrects the lateral and heading drift and leaves the speed to the network (`goal_factor` is
+  not used).
 On 'stand' the command velocity is zero and the goal freezes at the path's point; with steering
 the robot stops once its base is within `goal_radius` of it horizontally, or has passed it
 along the last commanded direction, or `stop_timeout_s` after the 'stand'; without steering it
