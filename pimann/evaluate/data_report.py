@@ -193,7 +193,7 @@ def clip_frames(name: str, trajectory: Trajectory, params: Params) -> pd.DataFra
             columns[f"{kind}_{rule}"] = np.nan if flags is None else _sliding(rms[kind], flags)
         columns[f"double_{rule}"] = np.nan if flags is None else flags.all(axis=1).astype(float)
     heights, speeds = _corner_speeds(feet.positions, feet.rotations, moved)
-    columns["lowest_corner"] = feet.heights.min(axis=1)
+    columns["lowest_corner"] = heights.min(axis=(1, 2))
     file_flags = contacts.get("file_contacts")
     columns["flight"] = np.nan if file_flags is None else (~file_flags.any(axis=1)).astype(float)
     speeds = np.where(heights <= GLIDE_HEIGHT, speeds, np.nan).reshape(n, -1)

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pinocchio as pin
 
-from pimann.core.contacts import FEET, lowest_corner_heights, trajectory_configurations
+from pimann.core.contacts import FEET, trajectory_configurations
 from pimann.core.params import RetargetParams
 from pimann.core.robot import (
     JOINT_NAMES,
@@ -74,7 +74,7 @@ def frame_measures(
     )
     robot_path = np.linalg.norm(np.diff(trajectory.base_position[:, :2], axis=0), axis=-1).sum()
     human_path = np.linalg.norm(np.diff(motion.pelvis_position[:, :2], axis=0), axis=-1).sum()
-    lowest = lowest_corner_heights(soles, sole_rotations).min(axis=1)  # (T,) either foot
+    lowest = corners[..., 2].min(axis=(1, 2))  # (T,) the lowest corner of either foot
     return {
         "orientation_error_deg": np.degrees(np.arccos(cosine)),  # (T, 13)
         "at_limit": at_limit,  # (T, 26)
