@@ -55,6 +55,25 @@ def test_layout_sizes_and_windows(params):
         window_layout(dataclasses.replace(params.features, window="nope"), RATE, "full")
 
 
+def test_the_gait_phase_adds_two_fed_back_columns_after_the_pose(params):
+    plain = window_layout(params.features, RATE, "full")
+    phased = window_layout(
+        dataclasses.replace(params.features, gait_phase=True, gait_phase_step_s=0.8), RATE, "full"
+    )
+    assert (phased.input_dim, phased.output_dim) == (plain.input_dim + 2, plain.output_dim + 2)
+    assert phased.names("x")[-2:] == ["gait_phase.cos", "gait_phase.sin"]
+    assert phased.names("y")[:-2] == plain.names("y")
+    fed = phased.fed_back_columns()
+    assert fed[-2:].all() and np.array_equal(fed[:-2], plain.fed_back_columns())
+    assert FeatureLayout.from_json(phased.to_json()) == phased
+    assert "gait_phase" not in plain.to_json()  # layouts without it read as before
+    with pytest.raises(PimannError, match="gait_phase_step_s"):
+        FeatureLayout.from_json(phased.to_json().replace("0.8", "-1.0"))
+    clip = synthetic_clip()
+    with pytest.raises(PimannError, match="contacts"):
+        clip_features(dataclasses.replace(clip, contacts=None), phased)
+
+
 def test_constant_velocity_features_match_closed_form(params):
     velocity, yaw_rate = np.array([0.4, 0.1, 0.02]), 1.0
     clip = synthetic_clip(300, velocity, yaw_rate)

@@ -25,16 +25,18 @@ PARAMS = load_params()
 VARIANTS = ("full", "ground_projected")
 
 
-def layout_of(variant: str):
-    return window_layout(PARAMS.features, 50.0, variant)
+def layout_of(variant: str, gait_phase: bool = False):
+    layout = window_layout(PARAMS.features, 50.0, variant)
+    return dataclasses.replace(layout, gait_phase_step_s=0.8) if gait_phase else layout
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
-def test_no_output_column_copies_an_input_column(real_walks, variant):
+@pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
+                                                     ("full", True)])  # fmt: skip
+def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase):
     """Every output column that varies differs from every input column somewhere; the joints
     and their velocities are first differences (s_i = s_{i-1} + dt sdot_i exactly), and y_i's
-    window is x_{i+1}'s at the output offsets."""
-    layout = layout_of(variant)
+    window is x_{i+1}'s at the output offsets (with the gait phase too: y_i's is x_{i+1}'s)."""
+    layout = layout_of(variant, gait_phase)
     xs, ys = layout.x_slices, layout.y_slices
     for name, clip in real_walks.items():
         x, y, steps = clip_features(clip, layout)
@@ -47,6 +49,9 @@ def test_no_output_column_copies_an_input_column(real_walks, variant):
         joints_now, joints_before = y[:, ys["joints"]], x[:, xs["joints"]]
         assert np.abs(joints_now - joints_before - dt * y[:, ys["joint_velocities"]]).max() < 1e-12
         assert np.abs(x[1:, xs["joints"]] - joints_now[:-1]).max() == 0.0
+        if gait_phase:
+            assert np.abs(x[1:, xs["gait_phase"]] - y[:-1, ys["gait_phase"]]).max() == 0.0
+            assert np.allclose(np.linalg.norm(y[:, ys["gait_phase"]], axis=1), 1.0)
         # the next input's window at the output offsets is this output's
         inputs = list(layout.input_offsets)
         for block in ("base_linear", "base_angular"):
@@ -72,10 +77,12 @@ class Oracle:
         return np.stack([data_y[start + k] for _, data_y, start in self.rows])
 
 
-def oracle_rollout(robot, clips, starts, variant, steps, joint_velocity_feedback="predicted"):
+def oracle_rollout(
+    robot, clips, starts, variant, steps, joint_velocity_feedback="predicted", gait_phase=False
+):
     """Roll the oracle out from the data's state at `starts` for `steps` frames, steering and
     the command blend off: (oracle, joints (steps, B, nj), rotations, positions)."""
-    layout = layout_of(variant)
+    layout = layout_of(variant, gait_phase)
     features = [clip_features(clip, layout) for clip in clips]
     rows = [
         (x, y, int(np.searchsorted(s, start)))
@@ -127,18 +134,24 @@ def test_differenced_joint_velocities_feed_the_oracle_the_data_inputs(robot, rea
         assert np.abs(joints[:, row] - clip.joint_positions[start : start + 100]).max() < 1e-12
 
 
-@pytest.mark.parametrize("variant", VARIANTS)
+@pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
+                                                     ("full", True)])  # fmt: skip
 @pytest.mark.parametrize("batched", [False, True])
-def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(robot, real_walks, variant, batched):
+def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(
+    robot, real_walks, variant, gait_phase, batched
+):
     """Single and batched: the inputs at every step to 1e-9 (relative to values above 1), the
     joints exactly, the base orientation to rounding; the base position by the generator's own
     leg odometry stays near the clip's (retargeting placed it by odometry on other corners; the
-    baseline's yaw-only base puts the legs elsewhere, so not for it)."""
+    baseline's yaw-only base puts the legs elsewhere, so not for it). With the gait phase, its
+    fed-back (cos, sin) rebuild the data's too."""
     names = ["walk", "walk_mirrored", "walk_back"] if batched else ["walk"]
     clips = [real_walks[name] for name in names]
     starts = [60, 70, 55][: len(clips)]
     steps = 150
-    oracle, joints, rotations, positions = oracle_rollout(robot, clips, starts, variant, steps)
+    oracle, joints, rotations, positions = oracle_rollout(
+        robot, clips, starts, variant, steps, gait_phase=gait_phase
+    )
     assert oracle.calls == steps
     assert oracle.worst < 1e-9
     for row, (clip, start) in enumerate(zip(clips, starts, strict=True)):

@@ -157,6 +157,8 @@ class FeaturesParams:
     pose_input: Literal["world", "gravity"]  # the base pose the network sees (features.py)
     # motion classes (pimann.motion_classes) whose training clips are added time-reversed
     time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
+    gait_phase: bool  # the gait phase in the state (pimann.learn.gait_phase; not the paper)
+    gait_phase_step_s: Positive  # the longest step: a longer gap is a pause
 
 
 @dataclass(frozen=True, config=CONFIG)

@@ -44,8 +44,9 @@ from pimann.generate.leg_odometry import Odometry
 from pimann.generate.rollout_network import RolloutNetwork
 from pimann.generate.steering import goal_from_command, steer
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
-from pimann.learn.features import first_differences
+from pimann.learn.features import clip_phase, first_differences
 from pimann.learn.future_window import command_weights, next_future_matrix
+from pimann.learn.gait_phase import unit_phase
 from pimann.learn.standing import StandingPose
 
 SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
@@ -61,10 +62,13 @@ def data_start(
     layout, length = generator.layout, generator.history_length
     out_offsets = np.asarray(layout.output_offsets)
     rows: list[tuple[np.ndarray, ...]] = []
+    phases = []
     for trajectory, k in zip(trajectories, steps, strict=True):
         rotations, linear, angular, joint_velocities = first_differences(
             trajectory, generator.projected
         )
+        phase = clip_phase(trajectory, layout)
+        phases.append(None if phase is None else phase[k - 1])
         if k - length + 1 < 1 or k + out_offsets.max() >= len(rotations):
             raise PimannError(trajectory.source, f"step {k} leaves no room for the windows")
         frames = np.arange(k - length + 1, k + 1)
@@ -81,9 +85,10 @@ def data_start(
     history, future, joints, velocities, fed_position, fed_rpy, position, rotation, ahead = (
         np.stack(part) for part in zip(*rows, strict=True)
     )
-    generator.start_in_gait(
-        history, future, (joints, velocities, fed_position, fed_rpy), position, rotation, ahead
-    )
+    state = (joints, velocities, fed_position, fed_rpy)
+    if layout.gait_phase:
+        state += (np.stack(phases),)
+    generator.start_in_gait(history, future, state, position, rotation, ahead)
 
 
 class BatchGenerator:
@@ -134,6 +139,8 @@ class BatchGenerator:
         self.rotation = np.tile(rotation_rpy(*self.standing_rpy), (rows, 1, 1))
         self.joints = np.tile(standing.joints, (rows, 1))
         self.joint_velocities = np.zeros_like(self.joints)
+        # the gait phase's (cos, sin) (features.gait_phase): 0 at the start, held while stopped
+        self.phase = np.tile([1.0, 0.0], (rows, 1))
         self.yaw = np.full(rows, float(self.standing_rpy[2]))  # unwrapped
         self.heading = yaw_of(self.rotation)  # wrapped
         self.odometry = Odometry(robot, rows)
@@ -168,7 +175,7 @@ class BatchGenerator:
         self,
         history: np.ndarray,
         future: np.ndarray,
-        state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+        state: tuple[np.ndarray, ...],
         position: np.ndarray,
         rotation: np.ndarray,
         next_rotation: np.ndarray,
@@ -179,7 +186,8 @@ class BatchGenerator:
         (oldest first, world frame, L >= the input window's past span + 1); `future` (B, 2,
         F_out, 3): the window of frame k at the output offsets, in the base frame at k (what
         y_{k-1} predicts); `state`: joints, joint velocities, base position and roll-pitch-yaw
-        at k - 1 as the network sees them (its fed-back pose); `position`, `rotation`: the base
+        at k - 1 as the network sees them (its fed-back pose), then the gait phase's (cos, sin)
+        when the layout has one; `position`, `rotation`: the base
         pose at k - 1, `next_rotation`: at k. pimann.learn.teacher_forcing and the oracle test start
         rollouts of the data's own outputs this way.
         """
@@ -190,7 +198,11 @@ class BatchGenerator:
         self.history = np.ascontiguousarray(history[:, -self.history_length :], dtype=float)
         self.head = np.full(rows, self.history_length - 1)
         self.future = np.array(future, dtype=float)
-        joints, joint_velocities, fed_position, fed_rpy = state
+        if len(state) != 4 + self.layout.gait_phase:
+            raise PimannError(None, f"a start state of {len(state)} parts for this layout")
+        joints, joint_velocities, fed_position, fed_rpy = state[:4]
+        if self.layout.gait_phase:
+            self.phase = unit_phase(state[4])
         self.joints = np.array(joints, float)
         self.joint_velocities = np.array(joint_velocities, float)
         self.fed_position, self.fed_rpy = np.array(fed_position, float), np.array(fed_rpy, float)
@@ -321,6 +333,8 @@ class BatchGenerator:
             x[:, start + cut : stop] = future[:, part].reshape(n, -1)
         x[:, xs["joints"]] = self.joints[rows]
         x[:, xs["joint_velocities"]] = self.joint_velocities[rows]
+        if self.layout.gait_phase:
+            x[:, xs["gait_phase"]] = self.phase[rows]
         fed = self.layout.pose(self.fed_position[rows], self.fed_rpy[rows])
         x[:, xs["base_position"]], x[:, xs["base_rpy"]] = fed
         return x
@@ -370,6 +384,8 @@ class BatchGenerator:
         else:
             self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
         self.joints[rows] = joints
+        if self.layout.gait_phase:
+            self.phase[rows] = unit_phase(y[:, ys["gait_phase"]])
 
     def _lap(self, section: str) -> None:
         """Charge the time since the previous lap to `section` (a few 0.1 us a call)."""

@@ -33,6 +33,13 @@ class FeatureLayout:
     variant: str
     n_joints: int = N_JOINTS
     pose_input: str = "world"  # a key of POSE_INPUTS
+    # (cos, sin) of the gait phase after the pose (pimann.learn.gait_phase), its longest step
+    # in seconds; None: no phase (the paper)
+    gait_phase_step_s: float | None = None
+
+    @property
+    def gait_phase(self) -> bool:
+        return self.gait_phase_step_s is not None
 
     def pose(self, position: np.ndarray, rpy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The base pose as the network sees it (input and output): `pose_input` applied."""
@@ -51,7 +58,7 @@ class FeatureLayout:
             ("joint_velocities", self.n_joints),
             ("base_position", 3),
             ("base_rpy", 3),
-        ]
+        ] + ([("gait_phase", 2)] if self.gait_phase else [])
 
     @staticmethod
     def _slices(blocks: list[tuple[str, int]]) -> dict[str, slice]:
@@ -75,15 +82,21 @@ class FeatureLayout:
 
     def fed_back_columns(self) -> np.ndarray:
         """(input_dim,) bool: the input a rollout fills from its own earlier predictions (the
-        velocity window up to now, the joints and their velocities), not from the command."""
+        velocity window up to now, the joints and their velocities, the gait phase), not from
+        the command."""
         mask = np.zeros(self.input_dim, dtype=bool)
         slices = self.x_slices
         past = np.repeat(np.isin(self.input_offsets, self.past_input_offsets()), 3)
         for block in ("base_linear_window", "base_angular_window"):
             mask[slices[block]] = past
-        for block in ("joints", "joint_velocities"):
+        for block in self.fed_back_state():
             mask[slices[block]] = True
         return mask
+
+    def fed_back_state(self) -> tuple[str, ...]:
+        """The state blocks a rollout feeds back from y_{i-1} into x_i as they are (the pose
+        has its own rule, `rollout.pose_feedback`)."""
+        return ("joints", "joint_velocities") + (("gait_phase",) if self.gait_phase else ())
 
     @property
     def input_dim(self) -> int:
@@ -110,12 +123,18 @@ class FeatureLayout:
                 names += [f"{block}[{o}].{a}" for o in offsets for a in "xyz"]
             elif block == "base_rpy":
                 names += [f"base_rpy.{a}" for a in ("roll", "pitch", "yaw")]
+            elif block == "gait_phase":
+                names += ["gait_phase.cos", "gait_phase.sin"]
             else:
                 names += [f"{block}.{k}" for k in range(part.stop - part.start)]
         return names
 
     def to_json(self) -> str:
-        return json.dumps(dataclasses.asdict(self))
+        """The layout as JSON; without the gait phase as before it existed."""
+        fields = dataclasses.asdict(self)
+        if fields["gait_phase_step_s"] is None:
+            del fields["gait_phase_step_s"]
+        return json.dumps(fields)
 
     @classmethod
     def from_json(cls, text: str) -> FeatureLayout:
@@ -140,6 +159,8 @@ class FeatureLayout:
             f"variant {layout.variant!r}": layout.variant in VARIANTS,
             f"pose_input {layout.pose_input!r}": layout.pose_input in POSE_INPUTS,
             f"n_joints {layout.n_joints!r}": type(layout.n_joints) is int and layout.n_joints > 0,
+            f"gait_phase_step_s {layout.gait_phase_step_s!r}": layout.gait_phase_step_s is None
+            or (type(layout.gait_phase_step_s) in (int, float) and layout.gait_phase_step_s > 0),
         }
         bad = [what for what, fine in checks.items() if not fine]
         if bad:
@@ -204,4 +225,5 @@ def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> Featu
     return FeatureLayout(
         frames(window.input_s), frames(window.output_s), rate_hz, variant,
         pose_input=params.pose_input,
+        gait_phase_step_s=params.gait_phase_step_s if params.gait_phase else None,
     )  # fmt: skip

@@ -4,9 +4,11 @@ Step i of a clip gives one sample, as the authors' code builds it. The input x_i
 linear and angular velocities at the input window's offsets around frame i, each rotated into
 the base frame at i, then s_{i-1}, sdot_{i-1}, p_{i-1}, psi_{i-1}; the output y_i holds the
 velocities at the output window's offsets from frame i + 1, rotated into the base frame at
-i + 1, then s_i, sdot_i, p_i, psi_i. So y_i's window is the next input's window at the output
-offsets (no output column copies an input column) and its sample at offset 0 is the base motion
-from frame i to i + 1: the network generates the base motion. Velocities are first differences
+i + 1, then s_i, sdot_i, p_i, psi_i (with `features.gait_phase`, beyond the paper, the gait
+phase's cos and sin at i - 1 and i after them: pimann.learn.gait_phase). So y_i's window is
+the next input's window at the output offsets (no output column copies an input column) and
+its sample at offset 0 is the base motion from frame i to i + 1: the network generates the
+base motion. Velocities are first differences
 at the data rate (`first_differences`), so s_i = s_{i-1} + dt sdot_i holds in every pair. Both
 windows come from params as seconds (the authors' and the paper's differ only there); psi are
 Tait-Bryan angles in pinocchio's convention (R = Rz(yaw) Ry(pitch) Rx(roll)), yaw unwrapped
@@ -39,6 +41,7 @@ from pimann.core.rotations import matrix_to_rpy, yaw_only
 from pimann.core.trajectory import Trajectory
 from pimann.learn.dataset import FeatureDataset
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
+from pimann.learn.gait_phase import gait_phase, phase_vector
 from pimann.learn.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 from pimann.learn.standing import data_standing
 
@@ -71,6 +74,17 @@ def first_differences(
         angular[1:] = (rot[1:] * rot[:-1].inv()).as_rotvec() / dt
         joint_velocities[1:] = np.diff(joints, axis=0) / dt
     return rotations, linear, angular, joint_velocities
+
+
+def clip_phase(trajectory: Trajectory, layout: FeatureLayout) -> np.ndarray | None:
+    """(T, 2) the gait phase's (cos, sin) from the clip's contacts (pimann.learn.gait_phase),
+    or None when the layout has no phase."""
+    if not layout.gait_phase:
+        return None
+    if trajectory.contacts is None:
+        raise PimannError(trajectory.source, "features.gait_phase needs the clip's contacts")
+    phase = gait_phase(trajectory.contacts, layout.rate_hz, layout.gait_phase_step_s)
+    return phase_vector(phase)
 
 
 def clip_features(
@@ -109,8 +123,11 @@ def clip_features(
         to_base = rotations[centre].transpose(0, 2, 1)  # base <- world at the centre
         return np.einsum("nij,nkj->nki", to_base, at).reshape(len(centre), -1)
 
+    phase = clip_phase(trajectory, layout)
+
     def state(at: np.ndarray) -> list[np.ndarray]:
-        return [joints[at], joint_velocities[at], *layout.pose(position[at], rpy[at])]
+        parts = [joints[at], joint_velocities[at], *layout.pose(position[at], rpy[at])]
+        return parts if phase is None else [*parts, phase[at]]
 
     inputs, outputs = layout.input_offsets, layout.output_offsets
     x = np.concatenate(

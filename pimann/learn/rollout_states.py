@@ -76,8 +76,8 @@ class OwnRollouts:
             return torch.as_tensor(np.asarray(values), dtype=torch.float32, device=device)
 
         xs, ys = layout.x_slices, layout.y_slices
-        # the joints and their velocities: y's columns -> x's, normalised units
-        state = ["joints", "joint_velocities"]
+        # the joints and their velocities (and the gait phase): y's columns -> x's, normalised
+        state = layout.fed_back_state()
         self.x_state = np.concatenate([np.arange(xs[b].start, xs[b].stop) for b in state])
         y_state = np.concatenate([np.arange(ys[b].start, ys[b].stop) for b in state])
         self.y_state = y_state
