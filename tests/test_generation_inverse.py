@@ -27,7 +27,7 @@ VARIANTS = ("full", "ground_projected")
 
 def layout_of(variant: str, gait_phase: bool = False):
     layout = window_layout(PARAMS.features, 50.0, variant)
-    return dataclasses.replace(layout, gait_phase_step_s=0.8) if gait_phase else layout
+    return dataclasses.replace(layout, gait_phase_step_s=0.8 if gait_phase else None)
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
