@@ -68,11 +68,13 @@ def real_walks():
 
 @pytest.fixture(scope="module")
 def params():
-    """The small training's params (test_train, test_rollout_states); a test module's own
+    """The small training's params (test_train, test_rollout_states) on the paper's layout (130
+    inputs, 100 outputs: no gait phase, the sizes these tests name); a test module's own
     `params` fixture overrides this one."""
     base = load_params()
     train = dataclasses.replace(base.train, epochs=4, batch_size=64, device="cpu")
-    return dataclasses.replace(base, model=SMALL_MODEL, train=train)
+    features = dataclasses.replace(base.features, gait_phase=False)
+    return dataclasses.replace(base, model=SMALL_MODEL, train=train, features=features)
 
 
 @pytest.fixture(scope="module")

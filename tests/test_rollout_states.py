@@ -178,3 +178,31 @@ def test_held_out_loss_batches_and_mixes_the_data_and_own_inputs(own):
         torch.testing.assert_close(got, 0.75 * a + 0.25 * b, rtol=1e-5, atol=1e-7)
     plain = HeldOutLoss(loss, x, y, None, 7, None, 0.25)(model)
     torch.testing.assert_close(plain[0], once[0], rtol=1e-5, atol=1e-7)
+
+
+def test_own_inputs_feed_back_the_gait_phase_as_the_joints(params):
+    """With features.gait_phase the phase is fed-back state: row k's is the member's predicted
+    one at row k - 1 (as the joints), each piece's first row the data's."""
+    from builders import synthetic_collection
+
+    from pimann.learn.features import build_dataset
+
+    features = dataclasses.replace(params.features, gait_phase=True, gait_phase_step_s=0.8)
+    data = build_dataset(synthetic_collection(n_sources=3, frames=160), features, "full")
+    layout, stats = data.layout, data.stats
+    xs, ys = layout.x_slices, layout.y_slices
+    assert "gait_phase" in xs and np.ptp(data.x_train[:, xs["gait_phase"]]) > 0
+    model = MANN.from_seeds(layout.input_dim, layout.output_dim, SMALL_MODEL, [5]).eval()
+    rollouts = OwnRollouts(layout, stats, data.train_origin, 6, torch.device("cpu"))
+    x, y = torch.as_tensor(data.x_train), torch.as_tensor(data.y_train)
+    inputs = rollouts.inputs(model, x, y)
+    later = rollouts.pieces[:, 1:]
+    rows, previous = later[later >= 0], rollouts.pieces[:, :-1][later >= 0]
+    with torch.no_grad():
+        predicted = model(inputs[:, previous]).numpy() * stats.y_std + stats.y_mean
+    own_x = inputs[:, rows].numpy() * stats.x_std + stats.x_mean
+    np.testing.assert_allclose(
+        own_x[..., xs["gait_phase"]], predicted[..., ys["gait_phase"]], atol=1e-4
+    )
+    first = rollouts.pieces[:, 0]
+    assert torch.equal(inputs[0, first][:, xs["gait_phase"]], x[first][:, xs["gait_phase"]])

@@ -35,6 +35,7 @@ generated trajectories is applied here, with the same functions and contact rule
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 from collections.abc import Iterable
 from pathlib import Path
@@ -129,7 +130,9 @@ def data_pi_loss(trajectory: Trajectory, params: Params) -> dict[str, np.ndarray
     (N,), and `data_contacts` (N,) where the clip has contact flags."""
     import torch
 
+    # the paper's layout: L_B reads no gait phase, and a clip without contacts has none
     layout = window_layout(params.features, float(trajectory.rate_hz), "full")
+    layout = dataclasses.replace(layout, gait_phase_step_s=None)
     _, y, steps = clip_features(trajectory, layout)
     out = {"steps": steps, "lower_sole": np.empty(0), "data_contacts": np.empty(0)}
     if len(steps) == 0:
