@@ -62,13 +62,14 @@ def data_start(
     layout, length = generator.layout, generator.history_length
     out_offsets = np.asarray(layout.output_offsets)
     rows: list[tuple[np.ndarray, ...]] = []
-    phases = []
+    phases: list[np.ndarray] = []
     for trajectory, k in zip(trajectories, steps, strict=True):
         rotations, linear, angular, joint_velocities = first_differences(
             trajectory, generator.projected
         )
         phase = clip_phase(trajectory, layout)
-        phases.append(None if phase is None else phase[k - 1])
+        if phase is not None:
+            phases.append(phase[k - 1])
         if k - length + 1 < 1 or k + out_offsets.max() >= len(rotations):
             raise PimannError(trajectory.source, f"step {k} leaves no room for the windows")
         frames = np.arange(k - length + 1, k + 1)
@@ -85,10 +86,10 @@ def data_start(
     history, future, joints, velocities, fed_position, fed_rpy, position, rotation, ahead = (
         np.stack(part) for part in zip(*rows, strict=True)
     )
-    state = (joints, velocities, fed_position, fed_rpy)
-    if layout.gait_phase:
-        state += (np.stack(phases),)
-    generator.start_in_gait(history, future, state, position, rotation, ahead)
+    generator.start_in_gait(
+        history, future, (joints, velocities, fed_position, fed_rpy), position, rotation, ahead,
+        phase=np.stack(phases) if phases else None,
+    )  # fmt: skip
 
 
 class BatchGenerator:
@@ -175,10 +176,11 @@ class BatchGenerator:
         self,
         history: np.ndarray,
         future: np.ndarray,
-        state: tuple[np.ndarray, ...],
+        state: tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray],
         position: np.ndarray,
         rotation: np.ndarray,
         next_rotation: np.ndarray,
+        phase: np.ndarray | None = None,
     ) -> None:
         """Every row walking from inside a gait, as if frame k - 1 had just been generated.
 
@@ -186,10 +188,10 @@ class BatchGenerator:
         (oldest first, world frame, L >= the input window's past span + 1); `future` (B, 2,
         F_out, 3): the window of frame k at the output offsets, in the base frame at k (what
         y_{k-1} predicts); `state`: joints, joint velocities, base position and roll-pitch-yaw
-        at k - 1 as the network sees them (its fed-back pose), then the gait phase's (cos, sin)
-        when the layout has one; `position`, `rotation`: the base
-        pose at k - 1, `next_rotation`: at k. pimann.learn.teacher_forcing and the oracle test start
-        rollouts of the data's own outputs this way.
+        at k - 1 as the network sees them (its fed-back pose); `position`, `rotation`: the base
+        pose at k - 1, `next_rotation`: at k; `phase` (B, 2): the gait phase's (cos, sin) at
+        k - 1, which a layout with the phase needs. pimann.learn.teacher_forcing and the oracle
+        test start rollouts of the data's own outputs this way.
         """
         rows, length = len(self.head), history.shape[1]
         if length < self.history_length:
@@ -198,11 +200,11 @@ class BatchGenerator:
         self.history = np.ascontiguousarray(history[:, -self.history_length :], dtype=float)
         self.head = np.full(rows, self.history_length - 1)
         self.future = np.array(future, dtype=float)
-        if len(state) != 4 + self.layout.gait_phase:
-            raise PimannError(None, f"a start state of {len(state)} parts for this layout")
-        joints, joint_velocities, fed_position, fed_rpy = state[:4]
-        if self.layout.gait_phase:
-            self.phase = unit_phase(state[4])
+        if self.layout.gait_phase != (phase is not None):
+            raise PimannError(None, "a start with a gait phase exactly when the layout has one")
+        joints, joint_velocities, fed_position, fed_rpy = state
+        if phase is not None:
+            self.phase = unit_phase(phase)
         self.joints = np.array(joints, float)
         self.joint_velocities = np.array(joint_velocities, float)
         self.fed_position, self.fed_rpy = np.array(fed_position, float), np.array(fed_rpy, float)
