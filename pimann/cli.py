@@ -113,7 +113,9 @@ def cmd_metrics(args: argparse.Namespace) -> None:
     trajectory = _read_trajectory(args)
     with about(args.file):
         params = _params(args)
-        metrics = trajectory_metrics(trajectory, load_robot(), params.evaluate, params.contacts)
+        metrics = trajectory_metrics(
+            trajectory, load_robot(), params.evaluate, params.contacts, not args.rule_contacts
+        )
     print(json.dumps(metrics, indent=2))
 
 
@@ -277,6 +279,11 @@ def _parser() -> argparse.ArgumentParser:
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")
     metrics.add_argument("--group", help="clip group inside a collection file")
+    metrics.add_argument(
+        "--rule-contacts",
+        action="store_true",
+        help="contacts by the contact rule even where the file has flags (data as rollouts)",
+    )
 
     params = add("params", cmd_params, "the effective params of a profile as YAML")
     params.add_argument(

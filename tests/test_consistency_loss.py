@@ -7,6 +7,7 @@ it needs s_{i-1}, which the output alone gives only because the features are fir
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from pimann.core.params import load_params
@@ -66,3 +67,38 @@ def test_the_weight_adds_l_c_to_the_data_term_only(real_walks):
     assert extra.item() > 0.0
     assert torch.allclose(mse_c, mse + 2.0 * extra)
     assert pi.item() == pi_c.item() == 0.0
+
+
+def test_increments_are_the_predicted_joints_step_from_the_input_joints(real_walks):
+    """train.pi_joint_velocities increments: (s_i - s_{i-1}) / dt with s_{i-1} the input's
+    joints (x), computed from the output alone; for the data it is the data's sdot_i."""
+    loss, layout, x, y, stats = _loss_and_data(real_walks, 0.0)
+    xs, ys, dt = layout.x_slices, layout.y_slices, 1.0 / layout.rate_hz
+    rng = np.random.default_rng(2)
+    predicted = y.copy()
+    predicted[:, ys["joints"]] += rng.normal(0.0, 0.01, y[:, ys["joints"]].shape)
+    predicted[:, ys["joint_velocities"]] += 1.0  # the predicted sdot does not enter
+    got = loss.increments(_normalised(predicted, stats), _normalised(y, stats))[0].numpy()
+    want = (predicted[:, ys["joints"]] - x[:, xs["joints"]]) / dt
+    np.testing.assert_allclose(got, want, rtol=1e-3, atol=1e-2)
+    data = loss.increments(_normalised(y, stats), _normalised(y, stats))[0].numpy()
+    np.testing.assert_allclose(data, y[:, ys["joint_velocities"]], rtol=1e-4, atol=1e-3)
+
+
+def test_increments_enter_l_b_in_place_of_the_predicted_velocities(real_walks):
+    layout = window_layout(PARAMS.features, 50.0, "full")
+    x, y, _ = clip_features(real_walks["walk"], layout)
+    stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), y.std(0) + 1.0)
+    device = torch.device("cpu")
+    pairs = {
+        mode: TrainingLoss(layout, stats, "predicted", device, pi_joint_velocities=mode)
+        for mode in ("predicted", "increments")
+    }
+    target = _normalised(y, stats)
+    prediction = target.clone()
+    prediction[..., layout.y_slices["joint_velocities"]] += 0.5  # only sdot is off
+    _, pi_predicted = pairs["predicted"](prediction, target)
+    _, pi_increments = pairs["increments"](prediction, target)
+    _, pi_data = pairs["increments"](target, target)
+    assert pi_increments.item() == pytest.approx(pi_data.item(), rel=1e-5)  # sdot ignored
+    assert pi_predicted.item() > 2 * pi_increments.item()

@@ -479,3 +479,38 @@ def test_configurations_match_robot_configuration(robot):
         trajectory.joint_positions[1],
     )
     np.testing.assert_allclose(q[1], expected)
+
+
+def _split(metrics, name):
+    return metrics[f"support_rmse_linear_position_{name}_total"]
+
+
+def test_foot_split_of_a_single_support_is_the_lower_foot(robot):
+    metrics = trajectory_metrics(stance_trajectory(robot, slide=0.05), robot, PARAMS, CONTACTS)
+    assert _split(metrics, "other_foot") == 0.0  # the right leg swings high
+    assert _split(metrics, "lower_foot") == pytest.approx(
+        metrics["support_rmse_linear_position_total"], rel=1e-12
+    )
+    assert _split(metrics, "lower_foot") == pytest.approx(FRAMES * 0.05 / SQRT3 / 2, abs=0.01)
+
+
+@pytest.mark.parametrize(("lateral", "rise"), [(0.0, 0.0), (0.4, 0.0), (0.0, 0.015)])
+def test_foot_split_of_a_gliding_or_rising_double_support(robot, lateral, rise):
+    """Both feet down, the robot moved rigidly: a glide of `distance` (and `lateral`) over
+    10 s is horizontal for both feet, a rise of 1.5 cm (under the contact rule's 2 cm) vertical."""
+    distance = 0.0 if rise else 1.5
+    trajectory = line_trajectory(robot, distance=distance, lateral=lateral)
+    frames = len(trajectory)
+    trajectory.base_position[:, 2] += np.linspace(0.0, rise, frames)
+    metrics = trajectory_metrics(trajectory, robot, PARAMS, CONTACTS)
+    assert metrics["contact_fraction_left"] == metrics["contact_fraction_right"] == 1.0
+    speed = np.hypot(distance, lateral) / 10.0
+    per_foot = frames * np.hypot(speed, rise / 10.0) / SQRT3  # each foot, every frame
+    lower, other = _split(metrics, "lower_foot"), _split(metrics, "other_foot")
+    # the lower foot of each frame is one foot, the other the other: half of each foot's sum
+    assert lower + other == pytest.approx(metrics["support_rmse_linear_position_total"], 1e-12)
+    assert lower + other == pytest.approx(per_foot, rel=1e-6)
+    assert other == pytest.approx(per_foot / 2, rel=1e-6)
+    horizontal, vertical = (_split(metrics, f"other_foot_{p}") for p in ("horizontal", "vertical"))
+    assert horizontal == pytest.approx(frames * speed / SQRT3 / 2, rel=1e-6, abs=1e-9)
+    assert vertical == pytest.approx(frames * rise / 10.0 / SQRT3 / 2, rel=1e-6, abs=1e-9)

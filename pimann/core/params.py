@@ -191,6 +191,9 @@ class TrainParams:
     pi_gradient: Literal["both", "joints", "base", "joint_velocities"]  # what L_B's gradient moves
     # weight of the joints' consistency term, added to L_D: ((s - s_true)/dt - (sdot - sdot_true))^2
     consistency_weight: Float
+    # the joint velocities L_B pairs with the base twist: the predicted sdot_i (the paper) |
+    # the predicted joints' increments (s_i - s_{i-1}) / dt (what a rollout's joints do)
+    pi_joint_velocities: Literal["predicted", "increments"]
     pi_dropout: Bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
     input_noise: NonNegative  # std (normalised units) of noise on the fed-back inputs; 0: the paper
     rollout_states: Annotated[
@@ -253,6 +256,11 @@ class RolloutParams:
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
     # sdot fed back: the network's sdot_i | (s_i - s_{i-1}) / dt of its predicted joints
     joint_velocity_feedback: Literal["predicted", "differenced"]
+    # s_i = b * predicted s_i + (1 - b) * (s_{i-1} + dt * predicted sdot_i); 1: the paper
+    joint_position_blend: Annotated[Float, Field(ge=0, le=1)]
+    # the base orientation: integrated (the paper: R exp(omega dt)) | odometry (the support
+    # foot keeps its orientation, as leg odometry keeps its corner's position)
+    base_orientation: Literal["integrated", "odometry"]
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     start_pose: Literal["data", "robot"]  # standing pose of a start and a stop (standing.py)
     scenarios: dict[Str, list[_Command]]

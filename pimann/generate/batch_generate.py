@@ -381,6 +381,15 @@ class BatchGenerator:
         # in the base frame at k + 1 (as the features write it); kept in the world frame
         self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)  # R v
         joints = y[:, ys["joints"]]
+        if self.params.base_orientation == "odometry":  # the support foot's held (module doc)
+            base = rotation[rows] = self.odometry.orient(base, joints, index)
+            ahead = base @ exp_so3(angular[:, now] * self.dt)
+            ahead = self.next_rotation[rows] = yaw_only(ahead) if self.projected else ahead
+            self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)
+        blend = self.params.joint_position_blend
+        if blend < 1.0:  # towards the predicted velocities integrated (module docstring)
+            integrated = self.joints[rows] + self.dt * y[:, ys["joint_velocities"]]
+            joints = blend * joints + (1.0 - blend) * integrated
         if self.params.joint_velocity_feedback == "differenced":
             self.joint_velocities[rows] = (joints - self.joints[rows]) / self.dt
         else:
@@ -411,6 +420,7 @@ class BatchGenerator:
             still = np.ones(len(rotation), dtype=bool)
             still[walking] = False
             self.next_rotation[still] = rotation[still]
+            self.odometry.held_foot[still] = -1  # a restart holds its support foot anew
         heading = yaw_of(rotation)
         turn = heading - self.heading
         self.yaw, self.heading = self.yaw + np.arctan2(np.sin(turn), np.cos(turn)), heading

@@ -16,7 +16,11 @@ One network step per frame (50 Hz) from the standing configuration, driven by a 
    with w = (t / window end)^tau (`rollout.command_blend_tau`; the sample at t = 0 stays the
    network's own; null: no blend), then v_c = v - k0 R^T (p - p_d) and omega_c = omega - k1
    vee(skew(R_d^T R)) with steering.
-3. Joints s_i from y_i; R_{i+1} = R_i exp(omega_c(t=0) dt) for the next step.
+3. Joints s_i from y_i (`rollout.joint_position_blend` b < 1: b s_i + (1 - b)(s_{i-1} + dt
+   sdot_i), towards the predicted velocities integrated); R_{i+1} = R_i exp(omega_c(t=0) dt)
+   for the next step (`rollout.base_orientation: odometry`: R_i is first replaced by the
+   orientation that keeps the support foot's world orientation, held while it stays the
+   support foot, as rule 4 holds its corner's position).
 4. Base position by leg odometry: the support point (the lowest sole corner of the two feet)
    stays fixed in the world while it stays the support point; when it changes, the new one is
    pinned at its last world position on the ground (z = 0); a change of corner on the same foot

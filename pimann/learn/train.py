@@ -313,7 +313,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     )
     loss_fn = TrainingLoss(
         data.layout, data.stats, config.pi_configuration, device, config.pi_support,
-        config.pi_gradient, config.consistency_weight,
+        config.pi_gradient, config.consistency_weight, config.pi_joint_velocities,
     )  # fmt: skip
     fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)

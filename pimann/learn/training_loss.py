@@ -41,8 +41,10 @@ class TrainingLoss(torch.nn.Module):
         pi_support: str = "lower_sole",
         pi_gradient: str = "both",
         consistency_weight: float = 0.0,
+        pi_joint_velocities: str = "predicted",
     ):
         super().__init__()
+        self.pi_joint_velocities = pi_joint_velocities
         self.consistency_weight = float(consistency_weight)
         self.dt = 1.0 / float(layout.rate_hz)
         self.layout, self.pi_configuration = layout, pi_configuration
@@ -62,6 +64,18 @@ class TrainingLoss(torch.nn.Module):
         error = (prediction - target) * self.y_std
         gap = error[..., s["joints"]] / self.dt - error[..., s["joint_velocities"]]
         return gap.square().mean(dim=(-2, -1))
+
+    def increments(self, prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """(s_i - s_{i-1}) / dt of the predicted joints, physical units (train.pi_joint_velocities).
+
+        The joints a rollout writes move by this, not by the predicted sdot_i. The data satisfy
+        s_{i-1} = s_true - dt sdot_true, so it is (s - s_true) / dt + sdot_true.
+        """
+        s = self.layout.y_slices
+        joints, rates = s["joints"], s["joint_velocities"]
+        error = (prediction[..., joints] - target[..., joints]) * self.y_std[joints]
+        true_rates = target[..., rates] * self.y_std[rates] + self.y_mean[rates]
+        return error / self.dt + true_rates
 
     def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
         """Denormalised quantities of y (..., out) that L_B needs, by argument name."""
@@ -101,6 +115,10 @@ class TrainingLoss(torch.nn.Module):
         if not with_pi:
             return mse, torch.zeros_like(mse)
         terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
+        if self.pi_joint_velocities == "increments":
+            terms["joint_velocities"] = self.increments(
+                prediction if pi_prediction is None else pi_prediction, target
+            )
         if self.pi_support == "data_contacts":
             if contacts is None:
                 raise ValueError("pi_support data_contacts needs the samples' contacts")
