@@ -1,4 +1,5 @@
-"""The joints' consistency term L_C (train.consistency_weight) on a real retargeted clip.
+"""The joints' consistency term L_C (train.consistency_weight) and the feet term L_F
+(train.feet_weight) on a real retargeted clip.
 
 L_C charges a prediction whose joints and joint velocities disagree, s_i != s_{i-1} + dt sdot_i;
 it needs s_{i-1}, which the output alone gives only because the features are first differences.
@@ -102,3 +103,30 @@ def test_increments_enter_l_b_in_place_of_the_predicted_velocities(real_walks):
     _, pi_data = pairs["increments"](target, target)
     assert pi_increments.item() == pytest.approx(pi_data.item(), rel=1e-5)  # sdot ignored
     assert pi_predicted.item() > 2 * pi_increments.item()
+
+
+def test_feet_term_starts_from_the_input_joints_and_adds_to_the_data_term(real_walks):
+    """train.feet_weight: L_F from s_{i-1} (the input's joints, recovered from the output
+    alone) to the predicted s_i, added to L_D times the weight; L_B untouched."""
+    layout = window_layout(PARAMS.features, 50.0, "full")
+    x, y, _ = clip_features(real_walks["walk"], layout)
+    stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), y.std(0) + 1.0)
+    device = torch.device("cpu")
+    plain = TrainingLoss(layout, stats, "predicted", device)
+    weighted = TrainingLoss(layout, stats, "predicted", device, feet_weight=3.0)
+    xs, ys, dt = layout.x_slices, layout.y_slices, 1.0 / layout.rate_hz
+    predicted = y.copy()
+    predicted[:, ys["joints"]] += np.random.default_rng(4).normal(0, 0.01, (len(y), 26))
+    prediction, target = _normalised(predicted, stats), _normalised(y, stats)
+    got = weighted.feet(prediction, target)
+    motion = weighted.physics.feet_motion(
+        torch.as_tensor(x[:, xs["joints"]], dtype=torch.float32),
+        torch.as_tensor(predicted[:, ys["joints"]], dtype=torch.float32),
+        torch.as_tensor(predicted[:, ys["base_rpy"]], dtype=torch.float32),
+        dt, PARAMS.contacts.on_height,
+    )  # fmt: skip
+    torch.testing.assert_close(got, motion.mean()[None], rtol=2e-3, atol=1e-6)
+    assert got.item() > 3 * weighted.feet(target, target).item()  # the joints' noise shows
+    (mse, pi), (mse_f, pi_f) = plain(prediction, target), weighted(prediction, target)
+    torch.testing.assert_close(mse_f - mse, 3.0 * got)
+    torch.testing.assert_close(pi_f, pi)

@@ -80,6 +80,34 @@ def test_data_contacts_choose_the_feet(robot, loss, rng):
     assert (none == 0).all()
 
 
+@pytest.mark.parametrize("height", [0.02, 0.3])
+def test_near_ground_weights_each_foot_by_its_height(robot, rng, height):
+    """train.pi_support near_ground: each foot's residual weighted by
+    sigmoid((h - gap) 4 / h), the gap its height above the lower sole (pinocchio's here)."""
+    near = PhysicsInformedLoss(robot, dtype=torch.float64, near_ground=height)
+    plain = PhysicsInformedLoss(robot, dtype=torch.float64)
+    rows = still_foot_states(robot, rng, 16)
+    position, rpy, joints, twist, joint_velocities = (
+        torch.tensor(np.stack([r[i] for r in rows])) for i in range(5)
+    )
+    args = (position, rpy, joints, twist[:, :3], twist[:, 3:], joint_velocities)
+    left = torch.tensor([r[5] == LEFT_SOLE for r in rows])
+    lower = plain(*args)
+    other = plain(*args, support=torch.stack((~left, left), -1))
+    gaps = []
+    for p, angles, values in zip(position.numpy(), rpy.numpy(), joints.numpy(), strict=True):
+        q = robot.configuration(p, pin.Quaternion(pin.rpy.rpyToMatrix(angles)).coeffs(), values)
+        z = [robot.frame_placement(q, f).translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)]
+        gaps.append(abs(z[0] - z[1]))
+    weight = torch.sigmoid((height - torch.tensor(gaps)) * 4 / height)
+    lower_weight = torch.sigmoid(torch.tensor(4.0, dtype=torch.float64))
+    expected = (lower_weight * lower + weight * other) / (lower_weight + weight)
+    torch.testing.assert_close(near(*args), expected)
+    assert (other > 1e-4).all()  # the other foot moves: its weight shows
+    if height == 0.3:  # random poses: gaps of centimetres to decimetres, weights between
+        assert weight.min() < 0.1 and weight.max() > 0.5
+
+
 def test_loss_grows_with_foot_sliding(robot, loss, rng):
     """Sliding the support sole at speed u makes the base twist off by (J^B)^-1 u."""
     rows = still_foot_states(robot, rng, 4)
@@ -128,3 +156,36 @@ def test_leading_dims_and_float32(robot, rng):
     values = loss32(position, rpy, joints, twist[..., :3], twist[..., 3:], joint_velocities)
     assert values.shape == (2, 3) and values.dtype == torch.float32
     assert values.max() < 1e-9
+
+
+def test_feet_motion_is_the_other_soles_motion_seen_from_the_lower_one(robot, loss, rng):
+    """L_F against pinocchio: the other sole's pose in the lower sole's frame at two
+    configurations, its change over dt (linear; small-angle rotation), weighted by height."""
+    dt, height = 0.02, 0.3
+    before = rng.uniform(robot.joint_lower, robot.joint_upper, size=(10, 26))
+    after = before + rng.normal(scale=0.005, size=before.shape)  # about one frame's step
+    rpy = rng.uniform([-0.2, -0.2, -np.pi], [0.2, 0.2, np.pi], size=(10, 3))
+    value = loss.feet_motion(
+        *(torch.tensor(a) for a in (before, after, rpy)), dt=dt, height=height
+    ).numpy()
+    expected, weights = [], []
+    for q0, q1, angles in zip(before, after, rpy, strict=True):
+        quaternion = pin.Quaternion(pin.rpy.rpyToMatrix(angles)).coeffs()
+        poses = [
+            {f: robot.frame_placement(robot.configuration(np.zeros(3), quaternion, q), f)
+             for f in (LEFT_SOLE, RIGHT_SOLE)}
+            for q in (q0, q1)
+        ]  # fmt: skip
+        z = {f: poses[1][f].translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)}
+        lower, other = sorted(z, key=z.get)
+        relative = [p[lower].inverse() * p[other] for p in poses]
+        linear = (relative[1].translation - relative[0].translation) / dt
+        angular = pin.log3(relative[0].rotation.T @ relative[1].rotation) / dt
+        weight = 1 / (1 + np.exp(-(height - (z[other] - z[lower])) * 4 / height))
+        weights.append(weight)
+        expected.append(weight * np.mean(np.concatenate((linear, angular)) ** 2))
+    np.testing.assert_allclose(value, expected, rtol=3e-4)  # small-angle vee against log3
+    assert min(weights) < 0.2 and max(weights) > 0.5  # heights that count and do not
+    assert np.min(expected) > 0  # the feet move relative to each other
+    still = loss.feet_motion(*(torch.tensor(a) for a in (after, after, rpy)), dt=dt, height=height)
+    assert still.abs().max() < 1e-20  # no motion, no loss

@@ -187,10 +187,12 @@ class TrainParams:
     restart_period: Count  # epochs of the first cosine cycle (Te)
     restart_mult: Count  # each cycle this many times longer (Tmult)
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
-    pi_support: Literal["lower_sole", "data_contacts"]  # which foot L_B keeps still
+    pi_support: Literal["lower_sole", "data_contacts", "near_ground"]  # which feet L_B holds
     pi_gradient: Literal["both", "joints", "base", "joint_velocities"]  # what L_B's gradient moves
     # weight of the joints' consistency term, added to L_D: ((s - s_true)/dt - (sdot - sdot_true))^2
     consistency_weight: Float
+    # weight of L_F, added to L_D: the other sole's motion relative to the lower one near the ground
+    feet_weight: Float
     # the joint velocities L_B pairs with the base twist: the predicted sdot_i (the paper) |
     # the predicted joints' increments (s_i - s_{i-1}) / dt (what a rollout's joints do)
     pi_joint_velocities: Literal["predicted", "increments"]

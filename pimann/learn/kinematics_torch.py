@@ -211,6 +211,15 @@ class TorchKinematics(nn.Module):
         }
 
 
+def rotation_vee(rotation: torch.Tensor) -> torch.Tensor:
+    """(..., 3) the vee of R's skew part, (R - R^T) / 2: sin(angle) times the axis, the
+    rotation vector to second order (as pimann.core.rotations.vee of skew_part)."""
+    r = rotation
+    return 0.5 * torch.stack(
+        (r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]), -1
+    )
+
+
 def _skew_torch(v: torch.Tensor) -> torch.Tensor:
     x, y, z = v.unbind(-1)
     zero = torch.zeros_like(x)

@@ -7,6 +7,9 @@ sole pose (R, p) in the base frame, so it equals sum_j sdot_j [p_j x w_j; w_j], 
 joint twists written in the base frame at the base origin (p_j a point on joint j's axis, w_j
 its unit axis). It depends on the joints only: the base pose cancels, and enters the loss
 only through alpha (which sole is lower), which is not differentiated.
+
+`feet_motion` (L_F, beyond the paper) is the position-level counterpart: how far one frame's
+predicted joints move the other sole relative to the lower one while it is near the ground.
 """
 
 from __future__ import annotations
@@ -15,7 +18,13 @@ import torch
 from torch import nn
 
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, Robot
-from pimann.learn.kinematics_torch import TorchKinematics
+from pimann.learn.kinematics_torch import TorchKinematics, rotation_vee
+
+
+def near_ground_weight(gap: torch.Tensor, height: float) -> torch.Tensor:
+    """How much a sole `gap` metres above the lower one counts as down: sigmoid((height - gap)
+    4 / height), 0.98 on the ground, 0.5 at the contact height, 0.02 at twice it."""
+    return torch.sigmoid((height - gap) * (4.0 / height))
 
 
 class PhysicsInformedLoss(nn.Module):
@@ -27,7 +36,11 @@ class PhysicsInformedLoss(nn.Module):
     alpha = 1 where the left sole is lower than the right one, as in the authors' code.
     With `support` (..., 2) flags of the feet in contact (the data's, not predicted), the
     residual is taken for each foot in contact and averaged over them: double support keeps
-    both feet still, a frame with no foot down adds nothing.
+    both feet still, a frame with no foot down adds nothing. With `near_ground` (m, the
+    contact rule's height), each foot's residual is weighted by how near the ground the
+    predicted pose puts it, sigmoid((near_ground - gap) / (near_ground / 4)) with gap its
+    height above the lower sole, and averaged with those weights: a foot lifting off still
+    counts while it is under the contact height, where the sliding metric counts it.
     """
 
     def __init__(
@@ -35,8 +48,10 @@ class PhysicsInformedLoss(nn.Module):
         robot: Robot,
         dtype: torch.dtype | None = None,
         device: torch.device | str | None = None,
+        near_ground: float | None = None,
     ):
         super().__init__()
+        self.near_ground = near_ground
         self.kinematics = TorchKinematics(
             robot, dtype=dtype or torch.get_default_dtype(), device=device,
             frames=(LEFT_SOLE, RIGHT_SOLE),
@@ -52,8 +67,8 @@ class PhysicsInformedLoss(nn.Module):
         return (sdot.unsqueeze(-2) @ twists).squeeze(-2), chain
 
     @staticmethod
-    def left_is_support(base_rpy: torch.Tensor, sole_positions: torch.Tensor) -> torch.Tensor:
-        """alpha: True where the left sole is lower (world z) than the right; no gradient.
+    def sole_heights(base_rpy: torch.Tensor, sole_positions: torch.Tensor) -> torch.Tensor:
+        """(..., 2) the soles' world heights less the base's; no gradient.
 
         `sole_positions` (..., 2, 3) in the base frame; world z differs by the base rotation's
         last row, [-sin(pitch), cos(pitch) sin(roll), cos(pitch) cos(roll)].
@@ -64,8 +79,13 @@ class PhysicsInformedLoss(nn.Module):
                 (-torch.sin(pitch), torch.cos(pitch) * torch.sin(roll),
                  torch.cos(pitch) * torch.cos(roll)), -1,
             )  # fmt: skip
-            gap = sole_positions[..., 0, :] - sole_positions[..., 1, :]
-            return (row * gap).sum(-1) < 0
+            return (row.unsqueeze(-2) * sole_positions).sum(-1)
+
+    @classmethod
+    def left_is_support(cls, base_rpy: torch.Tensor, sole_positions: torch.Tensor) -> torch.Tensor:
+        """alpha: True where the left sole is lower (world z) than the right; no gradient."""
+        heights = cls.sole_heights(base_rpy, sole_positions)
+        return heights[..., 0] < heights[..., 1]
 
     def forward(
         self,
@@ -81,10 +101,53 @@ class PhysicsInformedLoss(nn.Module):
         del base_position  # the body-fixed Jacobians and the sole height gap ignore it
         feet, chain = self.foot_twists(joints, joint_velocities)
         twist = torch.cat((base_linear_velocity, base_angular_velocity), -1)
-        if support is not None:
+        if support is not None or self.near_ground is not None:
             per_foot = (twist.unsqueeze(-2) + feet).square().mean(-1)  # (..., 2)
-            weight = support.to(per_foot.dtype)
-            return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
+            if support is not None:
+                weight = support.to(per_foot.dtype)
+                return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
+            heights = self.sole_heights(base_rpy, chain.frame_positions)
+            gap = heights - heights.min(-1, keepdim=True).values
+            weight = near_ground_weight(gap, self.near_ground)
+            return (per_foot * weight).sum(-1) / weight.sum(-1)
         left = self.left_is_support(base_rpy, chain.frame_positions)
         foot = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
         return (twist + foot).square().mean(-1)
+
+    def feet_motion(
+        self,
+        previous_joints: torch.Tensor,
+        joints: torch.Tensor,
+        base_rpy: torch.Tensor,
+        dt: float,
+        height: float,
+    ) -> torch.Tensor:
+        """(...,) how fast the other sole moves relative to the lower one from one frame's
+        joints to the next, weighted by how near the ground it is.
+
+        Both soles still on the ground keep their relative pose: the other sole's pose in the
+        lower sole's frame, R_l^T (p_o - p_l) and R_l^T R_o, is the same at s_{i-1} and s_i.
+        Its change over dt (m/s, and rad/s by the small-angle vee of the relative rotation),
+        squared and averaged over the 6 components, is weighted by
+        sigmoid((height - gap) 4 / height), the gap the other sole's height above the lower
+        one at s_i (no gradient), as `near_ground` weights L_B's feet.
+        """
+        now, before = self.kinematics.chains(joints), self.kinematics.chains(previous_joints)
+        heights = self.sole_heights(base_rpy, now.frame_positions)
+        left = (heights[..., 0] < heights[..., 1]).unsqueeze(-1)
+        weight = near_ground_weight((heights[..., 0] - heights[..., 1]).abs(), height)
+
+        def relative(chain):
+            p, r = chain.frame_positions, chain.frame_rotations
+            lower_p = torch.where(left, p[..., 0, :], p[..., 1, :])
+            other_p = torch.where(left, p[..., 1, :], p[..., 0, :])
+            lower_r = torch.where(left.unsqueeze(-1), r[..., 0, :, :], r[..., 1, :, :])
+            other_r = torch.where(left.unsqueeze(-1), r[..., 1, :, :], r[..., 0, :, :])
+            lower_t = lower_r.transpose(-1, -2)
+            return (lower_t @ (other_p - lower_p).unsqueeze(-1)).squeeze(-1), lower_t @ other_r
+
+        p1, r1 = relative(now)
+        p0, r0 = relative(before)
+        angle = rotation_vee(r0.transpose(-1, -2) @ r1)
+        rate = torch.cat((p1 - p0, angle), -1) / dt
+        return weight * rate.square().mean(-1)

@@ -124,7 +124,8 @@ def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params:
         "workers": 0,
     }  # what does not change the result
     digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
-    blob = json.dumps([digest, pi_weight, seeds, as_dict(params.model), train], sort_keys=True)
+    model, height = as_dict(params.model), params.contacts.on_height  # height: near_ground
+    blob = json.dumps([digest, pi_weight, seeds, model, train, height], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -314,6 +315,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     loss_fn = TrainingLoss(
         data.layout, data.stats, config.pi_configuration, device, config.pi_support,
         config.pi_gradient, config.consistency_weight, config.pi_joint_velocities,
+        job.params.contacts.on_height, config.feet_weight,
     )  # fmt: skip
     fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
     members = len(seeds)

@@ -42,16 +42,22 @@ class TrainingLoss(torch.nn.Module):
         pi_gradient: str = "both",
         consistency_weight: float = 0.0,
         pi_joint_velocities: str = "predicted",
+        contact_height: float = 0.02,
+        feet_weight: float = 0.0,
     ):
         super().__init__()
         self.pi_joint_velocities = pi_joint_velocities
+        self.feet_weight, self.contact_height = float(feet_weight), float(contact_height)
         self.consistency_weight = float(consistency_weight)
         self.dt = 1.0 / float(layout.rate_hz)
         self.layout, self.pi_configuration = layout, pi_configuration
         self.pi_support, self.pi_gradient = pi_support, pi_gradient
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
-        self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
+        near_ground = contact_height if pi_support == "near_ground" else None
+        self.physics = PhysicsInformedLoss(
+            load_robot("retarget"), torch.float32, device, near_ground=near_ground
+        )
         self.to(device)
 
     def consistency(self, prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -64,6 +70,19 @@ class TrainingLoss(torch.nn.Module):
         error = (prediction - target) * self.y_std
         gap = error[..., s["joints"]] / self.dt - error[..., s["joint_velocities"]]
         return gap.square().mean(dim=(-2, -1))
+
+    def feet(self, prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+        """L_F (E,): the other sole's motion relative to the lower one from s_{i-1} (the
+        data's: s_true - dt sdot_true) to the predicted s_i, near the ground."""
+        s = self.layout.y_slices
+        physical = prediction * self.y_std + self.y_mean
+        truth = target * self.y_std + self.y_mean
+        previous = truth[..., s["joints"]] - self.dt * truth[..., s["joint_velocities"]]
+        motion = self.physics.feet_motion(
+            previous, physical[..., s["joints"]], physical[..., s["base_rpy"]].detach(),
+            self.dt, self.contact_height,
+        )  # fmt: skip
+        return motion.mean(-1)
 
     def increments(self, prediction: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         """(s_i - s_{i-1}) / dt of the predicted joints, physical units (train.pi_joint_velocities).
@@ -112,6 +131,10 @@ class TrainingLoss(torch.nn.Module):
         mse = (prediction - target).square().mean(dim=(-2, -1))
         if self.consistency_weight:
             mse = mse + self.consistency_weight * self.consistency(prediction, target)
+        if self.feet_weight:
+            mse = mse + self.feet_weight * self.feet(
+                prediction if pi_prediction is None else pi_prediction, target
+            )
         if not with_pi:
             return mse, torch.zeros_like(mse)
         terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
