@@ -95,3 +95,31 @@ def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(rob
         expected = (robot.frame_jacobian(q, sole, pin.WORLD) @ v)[0]
         assert share[k] == pytest.approx(expected, abs=1e-4)
     assert np.ptp(share[[0, 1, 4, 5]]) > 1e-3  # the samples differ: not a constant passing
+
+
+def test_feet_motion_moves_with_the_leg_joints_only(real_walks):
+    """L_F teacher-forced: the arms' joints do not move the soles, the legs' do."""
+    from pimann.core.robot import JOINT_NAMES
+    from pimann.learn.feature_layout import Normalisation, window_layout
+    from pimann.learn.features import clip_features
+    from pimann.learn.teacher_forcing import LEG_JOINTS, feet_motion
+    from pimann.learn.training_loss import TrainingLoss
+
+    params = load_params()
+    layout = window_layout(params.features, 50.0, "full")
+    x, y, _ = clip_features(real_walks["walk"], layout)
+    stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), y.std(0) + 1.0)
+    xn, yn = (x - stats.x_mean) / stats.x_std, (y - stats.y_mean) / stats.y_std
+    loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
+    height = params.contacts.on_height
+    data = feet_motion(loss, layout, stats, xn, yn, yn, height)
+    assert data.shape == (len(y),) and (data >= 0).all() and data.mean() > 0
+    joints = layout.y_slices["joints"].start
+    arms = [k for k in range(len(JOINT_NAMES)) if k not in LEG_JOINTS]
+    rng = np.random.default_rng(5)
+    moved_arms, moved_legs = yn.copy(), yn.copy()
+    moved_arms[:, [joints + k for k in arms]] += rng.normal(0, 0.3, (len(y), len(arms)))
+    moved_legs[:, [joints + k for k in LEG_JOINTS]] += rng.normal(0, 0.05, (len(y), 12))
+    arms_value = feet_motion(loss, layout, stats, xn, yn, moved_arms, height)
+    np.testing.assert_allclose(arms_value, data, rtol=1e-3, atol=1e-6)
+    assert feet_motion(loss, layout, stats, xn, yn, moved_legs, height).mean() > 3 * data.mean()

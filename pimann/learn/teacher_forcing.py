@@ -15,7 +15,11 @@ support (the data's contact flags) the same for the contact leg's share of the s
 velocity, (J_SF^B)^-1 J_SF^s sdot along the base's x (pimann.learn.physics_loss), which on a still
 foot cancels the base's forward velocity: L_B charges their sum, so where a model predicts a
 small base velocity this tells whether its legs shrank with it; and the slope of the
-predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's).
+predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's);
+and L_F (`feet_true`, `feet_pred`: the other sole's motion relative to the lower one near the
+ground over the frame, pimann.learn.physics_loss.feet_motion, from the input's joints to the
+data's and to the predicted ones): where the prediction's is far above the data's, one step
+already makes the trailing foot glide; where it is not, the rollout's own states do.
 """
 
 from __future__ import annotations
@@ -90,12 +94,38 @@ def contact_leg_velocity(
     return np.where(contacts.sum(axis=1) == 1, share, np.nan)
 
 
+def feet_motion(
+    loss: TrainingLoss,
+    layout,
+    stats,
+    x: np.ndarray,
+    y: np.ndarray,
+    joints_from: np.ndarray,
+    height: float,
+) -> np.ndarray:
+    """(N,) L_F of each sample (pimann.learn.physics_loss): the other sole's motion relative
+    to the lower one near the ground, from the input's joints s_{i-1} to the joints of
+    `joints_from` (normalised outputs: the data's or a prediction), at the data's base
+    orientation so that both are weighted alike."""
+    xs, ys, rpy = layout.x_slices["joints"], layout.y_slices["joints"], layout.y_slices["base_rpy"]
+    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    after = joints_from[:, ys] * stats.y_std[ys] + stats.y_mean[ys]
+    angles = y[:, rpy] * stats.y_std[rpy] + stats.y_mean[rpy]
+    with torch.no_grad():
+        motion = loss.physics.feet_motion(
+            *(torch.as_tensor(a, dtype=torch.float32) for a in (before, after, angles)),
+            dt=1.0 / layout.rate_hz, height=height,
+        )  # fmt: skip
+    return motion.numpy()
+
+
 def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
     """One row per model seed, split (train subset / test) and motion class."""
     from pimann.learn.model_files import load_model
 
     rows = []
     cache: dict[str, tuple] = {}
+    height = load_params().contacts.on_height
     for seed, folder in model_seeds(models_dir).items():
         model, layout, stats, meta = load_model(folder)
         dataset_path = Path(meta["dataset"])
@@ -120,8 +150,19 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                 split: contact_leg_velocity(loss, y, contacts)
                 for split, (_, y, _, contacts) in parts.items()
             }
-            cache[str(dataset_path)] = (dataset.layout.names("y"), parts, classes, loss, leg_truths)
-        names, parts, classes, loss, leg_truths = cache[str(dataset_path)]
+            feet_truths = {
+                split: feet_motion(loss, dataset.layout, dataset.stats, x, y, y, height)
+                for split, (x, y, _, _) in parts.items()
+            }
+            cache[str(dataset_path)] = (
+                dataset.layout.names("y"),
+                parts,
+                classes,
+                loss,
+                leg_truths,
+                feet_truths,
+            )
+        names, parts, classes, loss, leg_truths, feet_truths = cache[str(dataset_path)]
         columns = [names.index(name) for name in OUTPUTS]
         for split, (x, y, _, contacts) in parts.items():
             with torch.no_grad():
@@ -131,6 +172,7 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
             leg_truth = leg_truths[split]
             leg_prediction = contact_leg_velocity(loss, predicted, contacts)
             step_truth, step_prediction = leg_joint_steps(layout, stats, x, y, predicted)
+            feet_prediction = feet_motion(loss, layout, stats, x, y, predicted, height)
             for name in CLASSES:
                 mask = classes[split] == name
                 if mask.sum() < 50:
@@ -152,6 +194,8 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                     "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]), **leg,
                     "leg_step_slope": _slope(step_truth[mask].ravel(),
                                              step_prediction[mask].ravel()),
+                    "feet_true": feet_truths[split][mask].mean(),
+                    "feet_pred": feet_prediction[mask].mean(),
                 })  # fmt: skip
     return pd.DataFrame(rows)
 
