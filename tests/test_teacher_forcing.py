@@ -51,6 +51,9 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
     speed = table["vx_true"].where(~backward, -table["vx_true"])[straight]
     assert straight.sum() >= 3 and ((speed > 0.1) & (speed < 0.8)).all()
     assert table["samples"].min() >= 50 and np.isfinite(table["vx_slope"]).all()
+    for column in ("feet_true", "feet_pred", "feet_sdot", "sdot_step_slope"):
+        assert np.isfinite(table[column]).all()
+    assert (table["feet_pred"] > table["feet_true"]).all()  # an untrained network's joints
 
 
 def test_models_folder_or_one_training_output_and_a_named_error(tmp_path, capsys):
@@ -123,3 +126,19 @@ def test_feet_motion_moves_with_the_leg_joints_only(real_walks):
     arms_value = feet_motion(loss, layout, stats, xn, yn, moved_arms, height)
     np.testing.assert_allclose(arms_value, data, rtol=1e-3, atol=1e-6)
     assert feet_motion(loss, layout, stats, xn, yn, moved_legs, height).mean() > 3 * data.mean()
+
+
+def test_integrated_joints_are_the_input_joints_moved_by_the_predicted_velocities(real_walks):
+    """On the data's own outputs s_{i-1} + dt sdot_i is the data's s_i (first differences)."""
+    from pimann.learn.feature_layout import Normalisation, window_layout
+    from pimann.learn.features import clip_features
+    from pimann.learn.teacher_forcing import integrated_joints
+
+    layout = window_layout(load_params().features, 50.0, "full")
+    x, y, _ = clip_features(real_walks["walk"], layout)
+    stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), y.std(0) + 1.0)
+    xn, yn = (x - stats.x_mean) / stats.x_std, (y - stats.y_mean) / stats.y_std
+    np.testing.assert_allclose(integrated_joints(layout, stats, xn, yn), yn, atol=1e-9)
+    moved = yn.copy()
+    moved[:, layout.y_slices["joint_velocities"]] += 1.0
+    assert np.abs(integrated_joints(layout, stats, xn, moved) - yn).max() > 1e-3

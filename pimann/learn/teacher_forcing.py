@@ -19,7 +19,9 @@ predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as t
 and L_F (`feet_true`, `feet_pred`: the other sole's motion relative to the lower one near the
 ground over the frame, pimann.learn.physics_loss.feet_motion, from the input's joints to the
 data's and to the predicted ones): where the prediction's is far above the data's, one step
-already makes the trailing foot glide; where it is not, the rollout's own states do.
+already makes the trailing foot glide; where it is not, the rollout's own states do. Beside
+it, the same with the joints moved by the predicted velocities instead, s_{i-1} + dt sdot_i
+(`feet_sdot`), and the slope of those steps on the data's (`sdot_step_slope`).
 """
 
 from __future__ import annotations
@@ -119,6 +121,18 @@ def feet_motion(
     return motion.numpy()
 
 
+def integrated_joints(layout, stats, x: np.ndarray, predicted: np.ndarray) -> np.ndarray:
+    """`predicted` (normalised) with its joints replaced by s_{i-1} + dt sdot_i, the input's
+    joints moved by the predicted joint velocities (rollout.joint_position_blend 0)."""
+    xs, ys = layout.x_slices["joints"], layout.y_slices["joints"]
+    vs = layout.y_slices["joint_velocities"]
+    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    sdot = predicted[:, vs] * stats.y_std[vs] + stats.y_mean[vs]
+    out = predicted.copy()
+    out[:, ys] = (before + sdot / layout.rate_hz - stats.y_mean[ys]) / stats.y_std[ys]
+    return out
+
+
 def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataFrame:
     """One row per model seed, split (train subset / test) and motion class."""
     from pimann.learn.model_files import load_model
@@ -173,6 +187,9 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
             leg_prediction = contact_leg_velocity(loss, predicted, contacts)
             step_truth, step_prediction = leg_joint_steps(layout, stats, x, y, predicted)
             feet_prediction = feet_motion(loss, layout, stats, x, y, predicted, height)
+            integrated = integrated_joints(layout, stats, x, predicted)
+            feet_integrated = feet_motion(loss, layout, stats, x, y, integrated, height)
+            _, sdot_step = leg_joint_steps(layout, stats, x, y, integrated)
             for name in CLASSES:
                 mask = classes[split] == name
                 if mask.sum() < 50:
@@ -196,6 +213,8 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                                              step_prediction[mask].ravel()),
                     "feet_true": feet_truths[split][mask].mean(),
                     "feet_pred": feet_prediction[mask].mean(),
+                    "feet_sdot": feet_integrated[mask].mean(),
+                    "sdot_step_slope": _slope(step_truth[mask].ravel(), sdot_step[mask].ravel()),
                 })  # fmt: skip
     return pd.DataFrame(rows)
 
