@@ -237,10 +237,10 @@ def foot_split(a: Analysis) -> dict[str, float]:
     lower = np.zeros_like(a.contacts)
     lower[np.arange(len(lower)), np.argmin(a.feet.heights, axis=1)] = True  # ties: the left
     velocity = a.velocities("position")[..., :3]
-    other = a.contacts & ~lower
+    other, linear = a.contacts & ~lower, a.rms("linear_position")
     parts = {
-        "lower_foot": (a.contacts & lower, a.rms("linear_position")),
-        "other_foot": (other, a.rms("linear_position")),
+        "lower_foot": (a.contacts & lower, linear),
+        "other_foot": (other, linear),
         "other_foot_horizontal": (other, np.linalg.norm(velocity[..., :2], axis=-1) / SQRT3),
         "other_foot_vertical": (other, np.abs(velocity[..., 2]) / SQRT3),
     }

@@ -88,7 +88,7 @@ class Odometry:
         """
         transforms = self.frames.transforms(joints)
         heights = (rotation[:, None, 2:3] @ (transforms[:, :, :3] @ self.corners))[:, :, 0]
-        foot = heights.min(axis=2).argmin(axis=1)
+        foot = _support_foot(heights)
         rows = np.arange(len(index))
         changed = foot != self.held_foot[index]
         held = np.where(
@@ -99,7 +99,15 @@ class Odometry:
 
     def rotated_corners(self, rotation: np.ndarray, joints: np.ndarray) -> np.ndarray:
         """(B, 2, 3, C) sole corners relative to the base in world axes (base at the origin)."""
-        return rotation[:, None] @ (self.frames.transforms(joints)[:, :, :3] @ self.corners)
+        return self._in_world_axes(rotation, self.frames.transforms(joints))[0]
+
+    def _in_world_axes(
+        self, rotation: np.ndarray, transforms: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(sole corners (B, 2, 3, C), sole rotations (B, 2, 3, 3)) in world axes, from the
+        soles' base-frame `transforms` (B, 2, 4, 4)."""
+        axes = rotation[:, None]
+        return axes @ (transforms[:, :, :3] @ self.corners), axes @ transforms[:, :, :3, :3]
 
     def place(
         self, rotation: np.ndarray, joints: np.ndarray, first: np.ndarray | None = None
@@ -108,11 +116,11 @@ class Odometry:
 
         Returns (base position, lowest corner height of each foot (B, 2), support foot (B,)).
         """
-        transforms = self.frames.transforms(joints)
-        rotated = rotation[:, None] @ (transforms[:, :, :3] @ self.corners)
-        self.world_rotations = rotation[:, None] @ transforms[:, :, :3, :3]
+        rotated, self.world_rotations = self._in_world_axes(
+            rotation, self.frames.transforms(joints)
+        )
         heights = rotated[:, :, 2]  # (B, 2, C)
-        foot = heights.min(axis=2).argmin(axis=1)
+        foot = _support_foot(heights)
         corner = heights[self.rows, foot].argmin(axis=1)
         support_point = rotated[self.rows, foot, :, corner]  # (B, 3)
         if first is not None:
@@ -128,3 +136,8 @@ class Odometry:
         self.support_foot, self.support_corner = foot, corner
         self.world_corners = rotated + position[:, None, :, None]
         return position, self.world_corners[:, :, 2].min(axis=2), foot
+
+
+def _support_foot(heights: np.ndarray) -> np.ndarray:
+    """(B,) the foot with the lowest corner, from corner heights (B, 2, C)."""
+    return heights.min(axis=2).argmin(axis=1)

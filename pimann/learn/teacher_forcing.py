@@ -71,11 +71,17 @@ def _slope(truth: np.ndarray, prediction: np.ndarray) -> float:
     return float(centred @ (prediction - prediction.mean())) / denominator if denominator else 0.0
 
 
+def input_joints(layout, stats, x: np.ndarray) -> np.ndarray:
+    """(N, 26) s_{i-1}, the joints of the normalised inputs `x`, in radians."""
+    xs = layout.x_slices["joints"]
+    return x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+
+
 def leg_joint_steps(layout, stats, x: np.ndarray, y: np.ndarray, predicted: np.ndarray):
     """(truth, prediction) (N, legs): the leg joints' step s_i - s_{i-1} of the data's output
     and of the predicted one from the same input (normalised x, y, predicted; radians)."""
-    xs, ys = layout.x_slices["joints"], layout.y_slices["joints"]
-    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    ys = layout.y_slices["joints"]
+    before = input_joints(layout, stats, x)
     truth = y[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
     prediction = predicted[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
     return truth[:, LEG_JOINTS], prediction[:, LEG_JOINTS]
@@ -109,8 +115,8 @@ def feet_motion(
     to the lower one near the ground, from the input's joints s_{i-1} to the joints of
     `joints_from` (normalised outputs: the data's or a prediction), at the data's base
     orientation so that both are weighted alike."""
-    xs, ys, rpy = layout.x_slices["joints"], layout.y_slices["joints"], layout.y_slices["base_rpy"]
-    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    ys, rpy = layout.y_slices["joints"], layout.y_slices["base_rpy"]
+    before = input_joints(layout, stats, x)
     after = joints_from[:, ys] * stats.y_std[ys] + stats.y_mean[ys]
     angles = y[:, rpy] * stats.y_std[rpy] + stats.y_mean[rpy]
     with torch.no_grad():
@@ -124,9 +130,8 @@ def feet_motion(
 def integrated_joints(layout, stats, x: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """`predicted` (normalised) with its joints replaced by s_{i-1} + dt sdot_i, the input's
     joints moved by the predicted joint velocities (rollout.joint_position_blend 0)."""
-    xs, ys = layout.x_slices["joints"], layout.y_slices["joints"]
-    vs = layout.y_slices["joint_velocities"]
-    before = x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
+    ys, vs = layout.y_slices["joints"], layout.y_slices["joint_velocities"]
+    before = input_joints(layout, stats, x)
     sdot = predicted[:, vs] * stats.y_std[vs] + stats.y_mean[vs]
     out = predicted.copy()
     out[:, ys] = (before + sdot / layout.rate_hz - stats.y_mean[ys]) / stats.y_std[ys]
