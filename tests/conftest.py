@@ -10,11 +10,18 @@ import pytest
 from builders import SMALL_MODEL, synthetic_collection
 
 from pimann.core.params import SimulateParams, load_params
+from pimann.core.paths import SHARED_ENV, shared_dir
 from pimann.core.robot import Robot, load_robot
 from pimann.learn.dataset import write_dataset
 from pimann.learn.features import build_dataset
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """The tests read the robot and the mocap in place: without the shared folder, one line."""
+    if not (shared_dir() / "robots").is_dir():
+        pytest.exit(f"{shared_dir()}: no shared folder with robots/ here; set ${SHARED_ENV}", 2)
 
 
 @pytest.fixture(scope="session")

@@ -18,6 +18,12 @@ def yaw_of(R: np.ndarray) -> np.ndarray:
     return np.arctan2(R[..., 1, 0], R[..., 0, 0])
 
 
+def tilt_of(R: np.ndarray) -> np.ndarray:
+    """Tilt (rad) of rotation matrices (..., 3, 3): the angle between R's z axis and the
+    world's vertical, whatever the heading (0 for a flat sole)."""
+    return np.arccos(np.clip(np.asarray(R, dtype=float)[..., 2, 2], -1.0, 1.0))
+
+
 def rot_z(angle: np.ndarray | float) -> np.ndarray:
     """Rz(angle) for each angle: (...) -> (..., 3, 3)."""
     c, s = np.cos(angle), np.sin(angle)

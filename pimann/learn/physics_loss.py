@@ -81,11 +81,15 @@ class PhysicsInformedLoss(nn.Module):
             )  # fmt: skip
             return (row.unsqueeze(-2) * sole_positions).sum(-1)
 
+    @staticmethod
+    def lower_is_left(heights: torch.Tensor) -> torch.Tensor:
+        """(...,) True where the left sole's height (`sole_heights`) is below the right's."""
+        return heights[..., 0] < heights[..., 1]
+
     @classmethod
     def left_is_support(cls, base_rpy: torch.Tensor, sole_positions: torch.Tensor) -> torch.Tensor:
         """alpha: True where the left sole is lower (world z) than the right; no gradient."""
-        heights = cls.sole_heights(base_rpy, sole_positions)
-        return heights[..., 0] < heights[..., 1]
+        return cls.lower_is_left(cls.sole_heights(base_rpy, sole_positions))
 
     def forward(
         self,
@@ -134,7 +138,7 @@ class PhysicsInformedLoss(nn.Module):
         """
         now, before = self.kinematics.chains(joints), self.kinematics.chains(previous_joints)
         heights = self.sole_heights(base_rpy, now.frame_positions)
-        left = (heights[..., 0] < heights[..., 1]).unsqueeze(-1)
+        left = self.lower_is_left(heights).unsqueeze(-1)
         weight = near_ground_weight((heights[..., 0] - heights[..., 1]).abs(), height)
 
         def relative(chain):

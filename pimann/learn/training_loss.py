@@ -129,19 +129,16 @@ class TrainingLoss(torch.nn.Module):
         false: the same inputs without dropout).
         """
         mse = (prediction - target).square().mean(dim=(-2, -1))
+        physical = prediction if pi_prediction is None else pi_prediction  # what L_B judges
         if self.consistency_weight:
             mse = mse + self.consistency_weight * self.consistency(prediction, target)
         if self.feet_weight:
-            mse = mse + self.feet_weight * self.feet(
-                prediction if pi_prediction is None else pi_prediction, target
-            )
+            mse = mse + self.feet_weight * self.feet(physical, target)
         if not with_pi:
             return mse, torch.zeros_like(mse)
-        terms = self.pi_terms(prediction if pi_prediction is None else pi_prediction)
+        terms = self.pi_terms(physical)
         if self.pi_joint_velocities == "increments":
-            terms["joint_velocities"] = self.increments(
-                prediction if pi_prediction is None else pi_prediction, target
-            )
+            terms["joint_velocities"] = self.increments(physical, target)
         if self.pi_support == "data_contacts":
             if contacts is None:
                 raise ValueError("pi_support data_contacts needs the samples' contacts")
