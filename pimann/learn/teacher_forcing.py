@@ -18,8 +18,9 @@ small base velocity this tells whether its legs shrank with it; and the slope of
 predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's);
 and L_F (`feet_true`, `feet_pred`: the other sole's motion relative to the lower one near the
 ground over the frame, pimann.learn.physics_loss.feet_motion, from the input's joints to the
-data's and to the predicted ones): where the prediction's is far above the data's, one step
-already makes the trailing foot glide; where it is not, the rollout's own states do. Beside
+data's and to the predicted ones): how far one step from the data's state moves the other
+sole. It does not predict a rollout's sliding: trained with less dropout, a model halves it
+and its rollouts slide more (docs/walking_directions.md). Beside
 it, the same with the joints moved by the predicted velocities instead, s_{i-1} + dt sdot_i
 (`feet_sdot`), and the slope of those steps on the data's (`sdot_step_slope`).
 """
