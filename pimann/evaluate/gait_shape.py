@@ -38,8 +38,8 @@ from pimann.evaluate.metrics import analyse
 from pimann.generate.benchmark_clips import benchmark_clips
 from pimann.generate.rollout_layout import HELD_OUT, find_rollouts
 from pimann.learn.motion_classes import class_counts, majority_class
+from pimann.learn.teacher_forcing import LEG_JOINTS
 
-LEGS = ("hip", "knee", "ankle")
 HIGH_BAND_HZ = (6.0, 15.0)
 COLUMNS = [
     "leg_step_high_share", "contact_tilt_deg", "contact_yaw_rate", "base_yaw_rate",
@@ -67,20 +67,18 @@ def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str
     """The `COLUMNS` of one trajectory (module docstring)."""
     a = analyse(trajectory, robot, params.evaluate, params.contacts, file_contacts=False)
     contact = a.origin_contacts
-    legs = [i for i, name in enumerate(robot.joint_names) if any(k in name for k in LEGS)]
-    steps = np.diff(np.asarray(trajectory.joint_positions)[:, legs], axis=0)
+    steps = np.diff(np.asarray(trajectory.joint_positions)[:, LEG_JOINTS], axis=0)
     base_yaw = yaw_of(quaternion_xyzw_matrices(trajectory.base_quaternion_xyzw))
     base_rate = np.repeat(_rate(base_yaw, a.time)[:, None], 2, axis=1)
     sole_rate = _rate(yaw_of(a.feet.rotations), a.time)
     velocities = a.velocities("position", "local_world_aligned")
 
-    def in_contact(values: np.ndarray) -> float:
-        return float(np.mean(values[contact])) if contact.any() else float("nan")
+    def in_contact(values: np.ndarray, over=np.mean) -> float:
+        return float(over(values[contact])) if contact.any() else float("nan")
 
     return {
         "leg_step_high_share": high_band_share(steps, float(np.mean(np.diff(a.time)))),
-        "contact_tilt_deg": float(np.degrees(np.median(tilt_of(a.feet.rotations)[contact])))
-        if contact.any() else float("nan"),
+        "contact_tilt_deg": in_contact(np.degrees(tilt_of(a.feet.rotations)), np.median),
         "contact_yaw_rate": in_contact(np.abs(sole_rate)),
         "base_yaw_rate": in_contact(np.abs(base_rate)),
         "leg_yaw_rate": in_contact(np.abs(sole_rate - base_rate)),

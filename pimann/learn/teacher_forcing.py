@@ -78,13 +78,19 @@ def input_joints(layout, stats, x: np.ndarray) -> np.ndarray:
     return x[:, xs] * stats.x_std[xs] + stats.x_mean[xs]
 
 
+def output_part(layout, stats, y: np.ndarray, name: str) -> np.ndarray:
+    """(N, ...) the output block `name` of normalised outputs `y` (the data's or a
+    prediction) in physical units."""
+    ys = layout.y_slices[name]
+    return y[:, ys] * stats.y_std[ys] + stats.y_mean[ys]
+
+
 def leg_joint_steps(layout, stats, x: np.ndarray, y: np.ndarray, predicted: np.ndarray):
     """(truth, prediction) (N, legs): the leg joints' step s_i - s_{i-1} of the data's output
     and of the predicted one from the same input (normalised x, y, predicted; radians)."""
-    ys = layout.y_slices["joints"]
     before = input_joints(layout, stats, x)
-    truth = y[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
-    prediction = predicted[:, ys] * stats.y_std[ys] + stats.y_mean[ys] - before
+    truth = output_part(layout, stats, y, "joints") - before
+    prediction = output_part(layout, stats, predicted, "joints") - before
     return truth[:, LEG_JOINTS], prediction[:, LEG_JOINTS]
 
 
@@ -116,10 +122,9 @@ def feet_motion(
     to the lower one near the ground, from the input's joints s_{i-1} to the joints of
     `joints_from` (normalised outputs: the data's or a prediction), at the data's base
     orientation so that both are weighted alike."""
-    ys, rpy = layout.y_slices["joints"], layout.y_slices["base_rpy"]
     before = input_joints(layout, stats, x)
-    after = joints_from[:, ys] * stats.y_std[ys] + stats.y_mean[ys]
-    angles = y[:, rpy] * stats.y_std[rpy] + stats.y_mean[rpy]
+    after = output_part(layout, stats, joints_from, "joints")
+    angles = output_part(layout, stats, y, "base_rpy")
     with torch.no_grad():
         motion = loss.physics.feet_motion(
             *(torch.as_tensor(a, dtype=torch.float32) for a in (before, after, angles)),
@@ -131,9 +136,9 @@ def feet_motion(
 def integrated_joints(layout, stats, x: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """`predicted` (normalised) with its joints replaced by s_{i-1} + dt sdot_i, the input's
     joints moved by the predicted joint velocities (rollout.joint_position_blend 0)."""
-    ys, vs = layout.y_slices["joints"], layout.y_slices["joint_velocities"]
+    ys = layout.y_slices["joints"]
     before = input_joints(layout, stats, x)
-    sdot = predicted[:, vs] * stats.y_std[vs] + stats.y_mean[vs]
+    sdot = output_part(layout, stats, predicted, "joint_velocities")
     out = predicted.copy()
     out[:, ys] = (before + sdot / layout.rate_hz - stats.y_mean[ys]) / stats.y_std[ys]
     return out
