@@ -25,13 +25,17 @@ PARAMS = load_params()
 VARIANTS = ("full", "ground_projected")
 
 
-def layout_of(variant: str, gait_phase: bool = False):
+def layout_of(variant: str, gait_phase: bool | str = False):
+    """`gait_phase`: False (none), True (the stride's) or "feet" (one per foot)."""
     layout = window_layout(PARAMS.features, 50.0, variant)
-    return dataclasses.replace(layout, gait_phase_step_s=0.8 if gait_phase else None)
+    return dataclasses.replace(
+        layout, gait_phase_step_s=0.8 if gait_phase else None,
+        gait_phase_per_foot=gait_phase == "feet",
+    )  # fmt: skip
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True)])  # fmt: skip
+                                                     ("full", True), ("full", "feet")])  # fmt: skip
 def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase):
     """Every output column that varies differs from every input column somewhere; the joints
     and their velocities are first differences (s_i = s_{i-1} + dt sdot_i exactly), and y_i's
@@ -51,7 +55,9 @@ def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase
         assert np.abs(x[1:, xs["joints"]] - joints_now[:-1]).max() == 0.0
         if gait_phase:
             assert np.abs(x[1:, xs["gait_phase"]] - y[:-1, ys["gait_phase"]]).max() == 0.0
-            assert np.allclose(np.linalg.norm(y[:, ys["gait_phase"]], axis=1), 1.0)
+            pairs = y[:, ys["gait_phase"]].reshape(len(y), -1, 2)
+            assert pairs.shape[1] == (2 if gait_phase == "feet" else 1)
+            assert np.allclose(np.linalg.norm(pairs, axis=2), 1.0)
         # the next input's window at the output offsets is this output's
         inputs = list(layout.input_offsets)
         for block in ("base_linear", "base_angular"):
@@ -135,7 +141,7 @@ def test_differenced_joint_velocities_feed_the_oracle_the_data_inputs(robot, rea
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True)])  # fmt: skip
+                                                     ("full", True), ("full", "feet")])  # fmt: skip
 @pytest.mark.parametrize("batched", [False, True])
 def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(
     robot, real_walks, variant, gait_phase, batched
@@ -144,7 +150,7 @@ def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(
     joints exactly, the base orientation to rounding; the base position by the generator's own
     leg odometry stays near the clip's (retargeting placed it by odometry on other corners; the
     baseline's yaw-only base puts the legs elsewhere, so not for it). With the gait phase, its
-    fed-back (cos, sin) rebuild the data's too."""
+    fed-back (cos, sin) rebuild the data's too, the stride's and each foot's."""
     names = ["walk", "walk_mirrored", "walk_back"] if batched else ["walk"]
     clips = [real_walks[name] for name in names]
     starts = [60, 70, 55][: len(clips)]

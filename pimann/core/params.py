@@ -159,6 +159,7 @@ class FeaturesParams:
     time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
     gait_phase: bool  # the gait phase in the state (pimann.learn.gait_phase; not the paper)
     gait_phase_step_s: Positive  # the longest step: a longer gap is a pause
+    gait_phase_per_foot: bool  # one phase per foot, touchdown 0 and lift-off pi (not PFNN's)
 
 
 @dataclass(frozen=True, config=CONFIG)

@@ -141,7 +141,7 @@ class BatchGenerator:
         self.joints = np.tile(standing.joints, (rows, 1))
         self.joint_velocities = np.zeros_like(self.joints)
         # the gait phase's (cos, sin) (features.gait_phase): 0 at the start, held while stopped
-        self.phase = np.tile([1.0, 0.0], (rows, 1))
+        self.phase = np.tile([1.0, 0.0], (rows, len(layout.gait_phase_names) // 2 or 1))
         self.yaw = np.full(rows, float(self.standing_rpy[2]))  # unwrapped
         self.heading = yaw_of(self.rotation)  # wrapped
         self.odometry = Odometry(robot, rows)

@@ -8,6 +8,11 @@ speed; a touchdown of the same foot as the previous one advances it a whole turn
 between touchdowns longer than `step_s`) holds the phase still until `step_s` before the next
 touchdown: standing does not advance it. Before the first touchdown the phase runs up to it over
 `step_s` (from half a turn earlier); after the last it holds.
+
+With `features.gait_phase_per_foot` (beyond PFNN: the local phases of Starke et al., SIGGRAPH
+2020) each foot has a phase of its own, 0 at each of its touchdowns and pi at each of its
+lift-offs, under the same pause rule: a lift-off sits at one phase value whatever the speed
+and the double support, where the stride's phase puts it wherever the style does.
 """
 
 from __future__ import annotations
@@ -43,12 +48,40 @@ def gait_phase(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarra
     time = np.arange(len(contacts)) / rate_hz
     if len(frames) == 0:
         return np.zeros(len(contacts))
-    at = frames / rate_hz
     values = np.empty(len(frames))
     values[0] = np.pi * feet[0]
     # the next touchdown is half a turn on after the other foot's, a whole turn after its own
     values[1:] = np.pi * np.where(feet[1:] != feet[:-1], 1.0, 2.0)
-    values = np.cumsum(values)
+    return _through_events(frames / rate_hz, np.cumsum(values), time, step_s)
+
+
+def foot_phases(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray:
+    """(T, 2) each foot's unwrapped phase (left, right) of (T, 2) contact flags at `rate_hz`:
+    0 (mod 2 pi) at the foot's touchdowns, pi at its lift-offs, linear between, paused as the
+    stride's phase is (module docstring). A foot that never switches has phase 0."""
+    if step_s <= 0:
+        raise PimannError(None, f"features.gait_phase_step_s must be positive, not {step_s}")
+    contacts = np.asarray(contacts, dtype=bool)
+    if contacts.ndim != 2 or contacts.shape[1] != 2:
+        raise PimannError(None, f"contact flags of shape {contacts.shape}, not (T, 2)")
+    time = np.arange(len(contacts)) / rate_hz
+    phases = np.zeros((len(contacts), 2))
+    for foot in range(2):
+        frames = np.flatnonzero(contacts[1:, foot] != contacts[:-1, foot]) + 1
+        if len(frames) == 0:
+            continue
+        first = 0.0 if contacts[frames[0], foot] else np.pi  # a touchdown or a lift-off
+        values = first + np.pi * np.arange(len(frames))  # events alternate: half a turn each
+        phases[:, foot] = _through_events(frames / rate_hz, values, time, step_s)
+    return phases
+
+
+def _through_events(
+    at: np.ndarray, values: np.ndarray, time: np.ndarray, step_s: float
+) -> np.ndarray:
+    """The phase at `time` through the events' (time, value) knots: linear between events, held
+    through a gap longer than `step_s` until `step_s` before the next event, run up to the first
+    over `step_s` from half a turn earlier, held after the last."""
     knot_times, knot_values = [at[0] - step_s, at[0]], [values[0] - np.pi, values[0]]
     for k in range(1, len(at)):
         start = at[k] - min(at[k] - at[k - 1], step_s)
@@ -67,9 +100,12 @@ def phase_vector(phase: np.ndarray) -> np.ndarray:
 
 
 def unit_phase(vector: np.ndarray) -> np.ndarray:
-    """(..., 2) a predicted (cos, sin) put back on the unit circle (a rollout feeds it back);
-    a zero vector becomes (1, 0)."""
+    """(..., 2 n) predicted (cos, sin) pairs, each put back on the unit circle (a rollout feeds
+    them back); a zero pair becomes (1, 0)."""
     vector = np.asarray(vector, dtype=float)
+    if vector.shape[-1] != 2:
+        pairs = vector.reshape(*vector.shape[:-1], -1, 2)
+        return unit_phase(pairs).reshape(vector.shape)
     norm = np.linalg.norm(vector, axis=-1, keepdims=True)
     unit = np.zeros_like(vector)
     unit[..., 0] = 1.0
