@@ -14,10 +14,21 @@ from pimann.core.params import load_params
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
 from pimann.core.rotations import tilt_of
 from pimann.core.trajectory import write_trajectory
-from pimann.evaluate.gait_shape import COLUMNS, compare, gait_shape
+from pimann.evaluate.gait_shape import COLUMNS, compare, gait_shape, runs
 from pimann.generate.benchmark_clips import benchmark_clips
 from pimann.generate.rollout_layout import HELD_OUT
 from pimann.learn.motion_classes import class_counts, majority_class
+
+
+def standing_kinematics(robot):
+    """(q, pinocchio data with the frames placed) of the builders' standing robot."""
+    first = make_trajectory(np.zeros((1, 2)))
+    q = np.zeros(robot.model.nq)
+    q[:3], q[3:7] = first.base_position[0], first.base_quaternion_xyzw[0]
+    q[robot.q_index] = STANDING_JOINTS
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    return q, data
 
 
 def test_high_band_share_of_two_sinusoids_is_their_steps_energy_ratio(robot):
@@ -43,12 +54,7 @@ def test_a_robot_turned_in_place_twists_its_soles_with_its_base(robot):
     np.testing.assert_allclose([shape["contact_yaw_rate"], shape["base_yaw_rate"]], rate, rtol=1e-6)
     np.testing.assert_allclose(shape["leg_yaw_rate"], 0.0, atol=1e-6)
     # each sole origin circles the base's vertical axis: speed = rate x its horizontal radius
-    first = make_trajectory(np.zeros((1, 2)))
-    q = np.zeros(robot.model.nq)
-    q[:3], q[3:7] = first.base_position[0], first.base_quaternion_xyzw[0]
-    q[robot.q_index] = STANDING_JOINTS
-    data = robot.model.createData()
-    pin.framesForwardKinematics(robot.model, data, q)
+    q, data = standing_kinematics(robot)
     radii = [np.linalg.norm(data.oMf[robot.model.getFrameId(f)].translation[:2] - q[:2])
              for f in (LEFT_SOLE, RIGHT_SOLE)]  # fmt: skip
     np.testing.assert_allclose(shape["contact_horizontal_speed"], rate * np.mean(radii), rtol=1e-3)
@@ -57,6 +63,26 @@ def test_a_robot_turned_in_place_twists_its_soles_with_its_base(robot):
              for f in (LEFT_SOLE, RIGHT_SOLE)]  # fmt: skip
     np.testing.assert_allclose(shape["contact_tilt_deg"], np.median(tilts), atol=1e-6)
     assert np.isnan(shape["leg_step_high_share"])  # legs that never move: no step to judge
+
+
+def test_a_gliding_robot_travels_in_contact_and_a_lifted_one_peaks_at_its_lift(robot):
+    """Slid along x at 0.3 m/s on the floor, each sole is one stance of 0.3 m/s x the clip's
+    length, with no swing; lifted 8 cm by a raised cosine and put back, each sole swings
+    once, its peak pinocchio's standing sole height + 0.08 m, and travels nothing."""
+    frames, speed = 150, 0.3
+    xy = np.zeros((frames, 2))
+    xy[:, 0] = speed * np.arange(frames) / RATE
+    glide = gait_shape(make_trajectory(xy), robot, load_params())
+    np.testing.assert_allclose(glide["stance_travel"], speed * (frames - 1) / RATE, rtol=1e-9)
+    assert np.isnan(glide["swing_peak_height"])
+    lift = np.zeros(frames)
+    lift[40:81] = 0.04 * (1 - np.cos(2 * np.pi * np.arange(41) / 40))  # 0 .. 0.08 .. 0
+    lifted = gait_shape(make_trajectory(np.zeros((frames, 2)), z=lift), robot, load_params())
+    q, data = standing_kinematics(robot)
+    heights = [data.oMf[robot.model.getFrameId(f)].translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)]
+    np.testing.assert_allclose(lifted["swing_peak_height"], np.median(heights) + 0.08, atol=1e-9)
+    np.testing.assert_allclose(lifted["stance_travel"], 0.0, atol=1e-12)
+    assert runs(np.array([1, 1, 0, 1, 0, 0, 1], bool)) == [(0, 2), (3, 4), (6, 7)]
 
 
 def test_tilt_is_the_angle_of_the_z_axis_from_the_vertical():

@@ -13,7 +13,12 @@ on the sole origins, as the position-level sliding counts them):
   (`base_yaw_rate`, the same frames) and the leg's own (`leg_yaw_rate`, sole less base): a
   sole that holds its heading has a leg that turns against the base;
 - `contact_horizontal_speed`: the mean horizontal speed of a sole origin in contact (m/s);
-- `double_support_share`: the share of frames with both soles in contact.
+- `double_support_share`: the share of frames with both soles in contact;
+- `stance_travel`: the horizontal distance a sole origin covers while in contact, per stance
+  (m): where the sliding's position level comes from, summed over each stance (a foot that
+  skims the floor as it lifts or lands travels in contact);
+- `swing_peak_height`: the median peak height of a sole origin over its swings (runs out of
+  contact inside the clip, m): a low swing spends more of its travel near the floor.
 
 `python -m pimann.evaluate.gait_shape results/rollouts/w10 [...] --class forward` prints the
 medians over the steered (`--unsteered`: unsteered) rollouts of the benchmark clips whose
@@ -43,7 +48,8 @@ from pimann.learn.teacher_forcing import LEG_JOINTS
 HIGH_BAND_HZ = (6.0, 15.0)
 COLUMNS = [
     "leg_step_high_share", "contact_tilt_deg", "contact_yaw_rate", "base_yaw_rate",
-    "leg_yaw_rate", "contact_horizontal_speed", "double_support_share",
+    "leg_yaw_rate", "contact_horizontal_speed", "double_support_share", "stance_travel",
+    "swing_peak_height",
 ]  # fmt: skip
 
 
@@ -63,6 +69,27 @@ def high_band_share(
     return float(spectrum[inside].sum() / total) if total > 0 else float("nan")
 
 
+def runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """[start, stop) of every run of True in a 1-D bool array."""
+    edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
+
+
+def stance_and_swing(positions: np.ndarray, contact: np.ndarray) -> tuple[float, float]:
+    """(mean horizontal travel per stance, median swing peak height) of sole origins
+    `positions` (T, 2, 3) under `contact` (T, 2); NaN where there is no stance or no swing
+    inside the clip."""
+    travel, peaks = [], []
+    for foot in range(contact.shape[1]):
+        steps = np.linalg.norm(np.diff(positions[:, foot, :2], axis=0), axis=1)
+        travel += [steps[start : stop - 1].sum() for start, stop in runs(contact[:, foot])]
+        peaks += [positions[start:stop, foot, 2].max()
+                  for start, stop in runs(~contact[:, foot])
+                  if start > 0 and stop < len(contact)]  # fmt: skip
+    return (float(np.mean(travel)) if travel else float("nan"),
+            float(np.median(peaks)) if peaks else float("nan"))  # fmt: skip
+
+
 def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str, float]:
     """The `COLUMNS` of one trajectory (module docstring)."""
     a = analyse(trajectory, robot, params.evaluate, params.contacts, file_contacts=False)
@@ -76,6 +103,8 @@ def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str
     def in_contact(values: np.ndarray, over=np.mean) -> float:
         return float(over(values[contact])) if contact.any() else float("nan")
 
+    stance_travel, swing_peak = stance_and_swing(a.feet.positions, contact)
+
     return {
         "leg_step_high_share": high_band_share(steps, float(np.mean(np.diff(a.time)))),
         "contact_tilt_deg": in_contact(np.degrees(tilt_of(a.feet.rotations)), np.median),
@@ -84,6 +113,8 @@ def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str
         "leg_yaw_rate": in_contact(np.abs(sole_rate - base_rate)),
         "contact_horizontal_speed": in_contact(np.linalg.norm(velocities[..., :2], axis=-1)),
         "double_support_share": float(contact.all(axis=1).mean()),
+        "stance_travel": stance_travel,
+        "swing_peak_height": swing_peak,
     }  # fmt: skip
 
 
