@@ -10,11 +10,12 @@ import pinocchio as pin
 import pytest
 from builders import RATE, benchmark_collection, make_trajectory
 
+from pimann.core.contacts import true_runs
 from pimann.core.params import load_params
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
 from pimann.core.rotations import tilt_of
 from pimann.core.trajectory import write_trajectory
-from pimann.evaluate.gait_shape import COLUMNS, compare, gait_shape, runs
+from pimann.evaluate.gait_shape import COLUMNS, compare, gait_shape
 from pimann.generate.benchmark_clips import benchmark_clips
 from pimann.generate.rollout_layout import HELD_OUT
 from pimann.learn.motion_classes import class_counts, majority_class
@@ -82,7 +83,7 @@ def test_a_gliding_robot_travels_in_contact_and_a_lifted_one_peaks_at_its_lift(r
     heights = [data.oMf[robot.model.getFrameId(f)].translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)]
     np.testing.assert_allclose(lifted["swing_peak_height"], np.median(heights) + 0.08, atol=1e-9)
     np.testing.assert_allclose(lifted["stance_travel"], 0.0, atol=1e-12)
-    assert runs(np.array([1, 1, 0, 1, 0, 0, 1], bool)) == [(0, 2), (3, 4), (6, 7)]
+    assert true_runs(np.array([1, 1, 0, 1, 0, 0, 1], bool)) == [(0, 2), (3, 4), (6, 7)]
 
 
 def test_tilt_is_the_angle_of_the_z_axis_from_the_vertical():

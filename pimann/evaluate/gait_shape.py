@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pimann.core.contacts import true_runs
 from pimann.core.params import Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import Robot, load_robot
@@ -69,12 +70,6 @@ def high_band_share(
     return float(spectrum[inside].sum() / total) if total > 0 else float("nan")
 
 
-def runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """[start, stop) of every run of True in a 1-D bool array."""
-    edges = np.diff(np.concatenate([[0], np.asarray(mask, dtype=np.int8), [0]]))
-    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1), strict=True))
-
-
 def stance_and_swing(positions: np.ndarray, contact: np.ndarray) -> tuple[float, float]:
     """(mean horizontal travel per stance, median swing peak height) of sole origins
     `positions` (T, 2, 3) under `contact` (T, 2); NaN where there is no stance or no swing
@@ -82,9 +77,9 @@ def stance_and_swing(positions: np.ndarray, contact: np.ndarray) -> tuple[float,
     travel, peaks = [], []
     for foot in range(contact.shape[1]):
         steps = np.linalg.norm(np.diff(positions[:, foot, :2], axis=0), axis=1)
-        travel += [steps[start : stop - 1].sum() for start, stop in runs(contact[:, foot])]
+        travel += [steps[start : stop - 1].sum() for start, stop in true_runs(contact[:, foot])]
         peaks += [positions[start:stop, foot, 2].max()
-                  for start, stop in runs(~contact[:, foot])
+                  for start, stop in true_runs(~contact[:, foot])
                   if start > 0 and stop < len(contact)]  # fmt: skip
     return (float(np.mean(travel)) if travel else float("nan"),
             float(np.median(peaks)) if peaks else float("nan"))  # fmt: skip
