@@ -140,8 +140,9 @@ class BatchGenerator:
         self.rotation = np.tile(rotation_rpy(*self.standing_rpy), (rows, 1, 1))
         self.joints = np.tile(standing.joints, (rows, 1))
         self.joint_velocities = np.zeros_like(self.joints)
-        # the gait phase's (cos, sin) (features.gait_phase): 0 at the start, held while stopped
-        self.phase = np.tile([1.0, 0.0], (rows, len(layout.gait_phase_names) // 2 or 1))
+        # the gait phase's (cos, sin) pairs (features.gait_phase, none without it): 0 at the
+        # start, held while stopped
+        self.phase = np.tile([1.0, 0.0], (rows, len(layout.gait_phase_names) // 2))
         self.yaw = np.full(rows, float(self.standing_rpy[2]))  # unwrapped
         self.heading = yaw_of(self.rotation)  # wrapped
         self.odometry = Odometry(robot, rows)
@@ -189,7 +190,7 @@ class BatchGenerator:
         F_out, 3): the window of frame k at the output offsets, in the base frame at k (what
         y_{k-1} predicts); `state`: joints, joint velocities, base position and roll-pitch-yaw
         at k - 1 as the network sees them (its fed-back pose); `position`, `rotation`: the base
-        pose at k - 1, `next_rotation`: at k; `phase` (B, 2): the gait phase's (cos, sin) at
+        pose at k - 1, `next_rotation`: at k; `phase` (B, 2 or 4): the gait phase's (cos, sin) at
         k - 1, which a layout with the phase needs. pimann.learn.teacher_forcing and the oracle
         test start rollouts of the data's own outputs this way.
         """

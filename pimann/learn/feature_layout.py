@@ -48,8 +48,9 @@ class FeatureLayout:
         """The phase block's columns: the stride's (cos, sin), or each foot's."""
         if not self.gait_phase:
             return []
-        pairs = ["gait_phase.left", "gait_phase.right"] if self.gait_phase_per_foot else [
-            "gait_phase"]  # fmt: skip
+        pairs = ["gait_phase"]
+        if self.gait_phase_per_foot:
+            pairs = ["gait_phase.left", "gait_phase.right"]
         return [f"{pair}.{part}" for pair in pairs for part in ("cos", "sin")]
 
     def pose(self, position: np.ndarray, rpy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

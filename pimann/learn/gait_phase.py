@@ -22,13 +22,21 @@ import numpy as np
 from pimann.core.errors import PimannError
 
 
+def _flags(contacts: np.ndarray, step_s: float | None = None) -> np.ndarray:
+    """(T, 2) boolean contact flags, or one clear error on a wrong shape or pause length."""
+    if step_s is not None and step_s <= 0:
+        raise PimannError(None, f"features.gait_phase_step_s must be positive, not {step_s}")
+    contacts = np.asarray(contacts, dtype=bool)
+    if contacts.ndim != 2 or contacts.shape[1] != 2:
+        raise PimannError(None, f"contact flags of shape {contacts.shape}, not (T, 2)")
+    return contacts
+
+
 def touchdown_frames(contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(frames, feet): every touchdown (a foot's flag switching on) in time order; feet 0 left,
     1 right. A foot already down at frame 0 has no touchdown there; of two at one frame, the
     left's."""
-    contacts = np.asarray(contacts, dtype=bool)
-    if contacts.ndim != 2 or contacts.shape[1] != 2:
-        raise PimannError(None, f"contact flags of shape {contacts.shape}, not (T, 2)")
+    contacts = _flags(contacts)
     on = ~contacts[:-1] & contacts[1:]
     frames, feet = np.nonzero(on)
     order = np.lexsort((feet, frames))
@@ -41,9 +49,7 @@ def touchdown_frames(contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def gait_phase(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray:
     """(T,) the unwrapped phase (radians, non-decreasing) of (T, 2) contact flags (left, right)
     at `rate_hz`; see the module docstring. A clip without a touchdown has phase 0 throughout."""
-    if step_s <= 0:
-        raise PimannError(None, f"features.gait_phase_step_s must be positive, not {step_s}")
-    contacts = np.asarray(contacts, dtype=bool)
+    contacts = _flags(contacts, step_s)
     frames, feet = touchdown_frames(contacts)
     time = np.arange(len(contacts)) / rate_hz
     if len(frames) == 0:
@@ -59,11 +65,7 @@ def foot_phases(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarr
     """(T, 2) each foot's unwrapped phase (left, right) of (T, 2) contact flags at `rate_hz`:
     0 (mod 2 pi) at the foot's touchdowns, pi at its lift-offs, linear between, paused as the
     stride's phase is (module docstring). A foot that never switches has phase 0."""
-    if step_s <= 0:
-        raise PimannError(None, f"features.gait_phase_step_s must be positive, not {step_s}")
-    contacts = np.asarray(contacts, dtype=bool)
-    if contacts.ndim != 2 or contacts.shape[1] != 2:
-        raise PimannError(None, f"contact flags of shape {contacts.shape}, not (T, 2)")
+    contacts = _flags(contacts, step_s)
     time = np.arange(len(contacts)) / rate_hz
     phases = np.zeros((len(contacts), 2))
     for foot in range(2):
