@@ -352,7 +352,7 @@ def test_shared_reads_follow_the_robot_variants():
 # train.* settings that do not change a trained model: the matrix itself, and where or in what
 # slices it runs (tests/test_train.py shows members train alike in any group and batch)
 # settings that change how fast, not what, a training learns (threads: rounding only)
-TRAIN_NOT_RESULT = {"pi_weights", "eval_batch_size", "device", "workers", "threads"}
+TRAIN_NOT_RESULT = {"pi_weights", "eval_batch_size", "device", "workers", "threads", "adherent"}
 
 
 @pytest.mark.parametrize("name", ["train", "train_baseline"])

@@ -211,6 +211,9 @@ class TrainParams:
     # hardware has it (pimann.train.pick_precision)
     precision: Literal["float32", "bfloat16", "auto"]
     threads: Count | Literal["auto"]  # torch threads in all; auto: the free cores (no effect)
+    # also train, roll out and measure the ADHERENT baseline (models/adherent: its own
+    # features, outputs and rollout, Viceconte et al. 2022), beside `baseline`
+    adherent: Bool
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -240,6 +243,23 @@ _Command = Annotated[  # in params.yaml: a stand command has `stand`, a motion c
 
 def _fields_of(value: Any) -> Any:
     return value if isinstance(value, dict) else vars(value)
+
+
+# the rollout keys a protocol may set (the rest of `rollout` holds for it too)
+PROTOCOL_KEYS = (
+    "k0", "k1", "goal_factor", "goal_radius", "command_blend_tau", "planar_steering",
+    "held_command", "start_history", "start_pose",
+)  # fmt: skip
+
+
+@dataclass(frozen=True, config=CONFIG)
+class ProtocolParams:
+    """One of the authors' test protocols: a command script, rolled out without steering and
+    with it, each way with the rollout keys it sets (`PROTOCOL_KEYS`)."""
+
+    script: list[_Command]
+    unsteered: dict[Str, Any]
+    steered: dict[Str, Any]
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -272,6 +292,33 @@ class RolloutParams:
     benchmark_clips: Bool
     # ... and this many training clips' per motion class (in-distribution level); 0: none
     benchmark_train_clips: NonNegativeInt
+    # the authors' test protocols, rolled out as scenarios of their own name (rollout_layout)
+    protocols: dict[Str, ProtocolParams]
+
+    @model_validator(mode="after")
+    def _protocols(self) -> RolloutParams:
+        for name in self.protocols:
+            if name in self.scenarios:
+                raise _fail(f"@protocols.{name} is also a scenario's name")
+            for steering in (False, True):
+                self.for_protocol(name, steering)  # every key known, every value in range
+        return self
+
+    def for_protocol(self, name: str, steering: bool) -> RolloutParams:
+        """These params as protocol `name` sets them for its rollout with or without steering."""
+        way = "steered" if steering else "unsteered"
+        overrides = getattr(self.protocols[name], way)
+        for key in overrides:
+            if key not in PROTOCOL_KEYS:
+                raise _fail(
+                    f"@protocols.{name}.{way}.{key}: not a protocol key; known: "
+                    + ", ".join(PROTOCOL_KEYS)
+                )
+        fields = {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+        try:
+            return RolloutParams(**{**fields, **overrides, "protocols": {}})
+        except ValidationError as error:
+            raise _fail(f"@protocols.{name}.{way}: {validation_problem(error)}") from None
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -475,8 +522,10 @@ class Params:
 
 
 def model_names(params: Any) -> list[str]:
-    """The training outputs' folder names: w<weight> per PI weight, and the baseline."""
-    return [f"w{weight:g}" for weight in params.train.pi_weights] + ["baseline"]
+    """The training outputs' folder names: w<weight> per PI weight, the baseline, and with
+    `train.adherent` the ADHERENT baseline."""
+    adherent = ["adherent"] if getattr(params.train, "adherent", False) else []
+    return [f"w{weight:g}" for weight in params.train.pi_weights] + ["baseline", *adherent]
 
 
 def _unknown(key: str, value: Any, known: list) -> PydanticCustomError:
@@ -499,7 +548,7 @@ def _check_references(params: Params) -> None:
     for k, name in enumerate(params.rollout.scenario_names):
         if name not in params.rollout.scenarios:
             raise _unknown(f"rollout.scenario_names.{k}", name, scenarios)
-    rolled_out = params.rollout.scenario_names
+    rolled_out = [*params.rollout.scenario_names, *params.rollout.protocols]
     evaluate, weights = params.evaluate, params.train.pi_weights
     if evaluate.scenario not in rolled_out:
         raise _unknown("evaluate.scenario", evaluate.scenario, rolled_out)
