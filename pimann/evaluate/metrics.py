@@ -50,11 +50,13 @@ from pimann.core.contacts import (
 )
 from pimann.core.errors import PimannError, about
 from pimann.core.params import ContactParams, EvaluateParams
-from pimann.core.robot import Robot, load_robot
+from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
 from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch, to_heading_frame
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
 from pimann.evaluate.sliding import (
     SHARE_METRICS,
+    authors_sole_velocities,
+    contact_point_velocities,
     manifold_velocities,
     phase_share_metrics,
     skating_ratio,
@@ -74,8 +76,13 @@ FOOT_VELOCITY_FRAMES = {
 
 # the sliding metrics: name (in `support_rmse_<name>_*`) -> (part, level, representation,
 # contacts); representation None: `evaluate.foot_velocity_frame`; contacts "rule": the evaluate
-# rule on the lowest sole corner (or the file's flags), "origin": on the sole origin's height
+# rule on the lowest sole corner (or the file's flags), "origin": on the sole origin's height,
+# "authors": that trigger as the authors' rollout runs it (both feet on at the start, fed from
+# the first step's new state). `paper_*` is the authors' metric (the claims' and the paper's
+# figures'), the rest ours beside it.
 SLIDING = {
+    "paper_linear": ("linear", "authors", "world", "authors"),
+    "paper_angular": ("angular", "authors", "world", "authors"),
     "linear": ("linear", "velocity", None, "rule"),
     "angular": ("angular", "velocity", None, "rule"),
     "linear_world": ("linear", "velocity", "world", "rule"),
@@ -84,7 +91,9 @@ SLIDING = {
     "linear_position_world": ("linear", "position", "world", "rule"),
     "linear_origin_contacts": ("linear", "velocity", None, "origin"),
     "linear_position_origin_contacts": ("linear", "position", None, "origin"),
+    "contact_point": ("linear", "contact_point", "local_world_aligned", "rule"),
 }
+PAPER_SLIDING = ("paper_linear", "paper_angular")  # the authors' metric: frame 0 has no step
 
 
 def in_representation(velocities: np.ndarray, positions: np.ndarray, frame: str) -> np.ndarray:
@@ -109,6 +118,7 @@ class Analysis:
     frame: str  # evaluate.foot_velocity_frame
     contacts: np.ndarray  # (T, 2) bool
     origin_contacts: np.ndarray  # (T, 2) bool, the trigger on the sole origins' heights
+    authors_contacts: np.ndarray  # (T, 2) bool, ... as the authors' rollout runs it
     contacts_source: str
     joint_velocities_source: str
     displacement: np.ndarray  # (T, 3) base, start heading frame
@@ -122,7 +132,10 @@ class Analysis:
 
     def contacts_of(self, name: str) -> np.ndarray:
         """(T, 2) the contacts a `SLIDING` metric counts."""
-        return self.origin_contacts if SLIDING[name][3] == "origin" else self.contacts
+        rule = SLIDING[name][3]
+        if rule == "authors":
+            return self.authors_contacts
+        return self.origin_contacts if rule == "origin" else self.contacts
 
     def rms(self, name: str) -> np.ndarray:
         """(T, 2) per-frame RMS of a `SLIDING` metric, every frame (contact or not)."""
@@ -168,9 +181,17 @@ def analyse(
     if trajectory.joint_velocities is not None:
         joint_velocities, joint_source = np.asarray(trajectory.joint_velocities), "file"
     feet = foot_kinematics(robot, configurations, differences)  # LOCAL_WORLD_ALIGNED
+    step_velocities = joint_velocities
+    if trajectory.joint_velocities is None:  # the authors' first differences, sdot_i ending at i
+        step_velocities = np.zeros_like(joint_velocities)
+        step_velocities[1:] = (
+            np.diff(configurations[:, robot.q_index], axis=0) / np.diff(time)[:, None]
+        )
     levels = {
         "velocity": support_foot_velocities(robot, configurations, joint_velocities, feet.heights),
         "position": feet.velocities,
+        "authors": authors_sole_velocities(robot, configurations, step_velocities, feet.positions),
+        "contact_point": contact_point_velocities(feet.velocities, feet.rotations, SOLE_CORNERS),
     }
     feet.velocities = in_representation(
         levels["velocity"], feet.positions, params.foot_velocity_frame
@@ -182,10 +203,12 @@ def analyse(
         detected = contacts_from_heights(feet.heights, dt, rule)
         contacts, contacts_source = detected, "detected"
     origin_contacts = contacts_from_heights(feet.positions[..., 2], dt, rule)
+    authors_contacts = np.zeros_like(origin_contacts)  # frame 0: no step, nothing counted
+    authors_contacts[1:] = contacts_from_heights(feet.positions[1:, :, 2], dt, rule, initial=True)
     displacement, angles = base_drift(trajectory)
     return Analysis(
         time, feet, levels, params.foot_velocity_frame, contacts, origin_contacts,
-        contacts_source, joint_source, displacement, angles,
+        authors_contacts, contacts_source, joint_source, displacement, angles,
     )  # fmt: skip
 
 

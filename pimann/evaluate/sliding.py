@@ -9,6 +9,16 @@ rule so that metrics.py stays readable:
   sole's is its motion relative to the support sole: what the joint velocities alone make the
   feet do. The trajectory's own base motion (odometry, IK) does not enter (the metrics'
   velocity level).
+- Sole velocities as the authors' rollout computes them, step by step (BLF
+  VelMANNAutoregressive::advance): the support foot, its Jacobian and the base that holds it
+  still are taken at the previous state q_{i-1} with the new joint velocities sdot_i (the base
+  twist in the mixed representation: the base origin's velocity and the angular velocity in
+  world axes); that twist and sdot_i are then set at the new state q_i and both soles'
+  velocities read there. The support sole keeps a residual (the one-step lag), the other one
+  moves relative to it. The support foot is the one with the lowest of the authors' sole
+  corners (`AUTHORS_SOLE_CORNERS`, their config_mann.toml), the left on a tie.
+- The velocity of each sole's lowest corner (the contact point): a sole pivoting on that
+  corner has none, where its origin moves.
 - Velocities of a configuration trajectory by finite differences on the configuration manifold:
   what a trajectory's poses alone say about how it moves (the metrics' position level, the data
   report's sole velocities).
@@ -36,8 +46,12 @@ import pinocchio as pin
 
 from pimann.core.contacts import FEET
 from pimann.core.params import EvaluateParams
-from pimann.core.robot import Robot
+from pimann.core.robot import Robot, corner_offsets
+from pimann.core.rotations import quaternion_xyzw_matrices
 
+# the sole corners of the authors' evaluation (BLF config_mann.toml), in the sole frame: its
+# support-foot pick; the retargeting's larger soles are pimann.core.robot.SOLE_CORNERS
+AUTHORS_SOLE_CORNERS = np.array([[x, y, 0.0] for x in (0.08, -0.08) for y in (0.03, -0.03)])
 PHASES = ("touchdown", "mid", "liftoff")
 EDGE_S = 0.1  # s: the touchdown and lift-off windows (5 frames at 50 Hz)
 SHARE_METRICS = ("linear", "linear_position")  # the pimann.evaluate.metrics.SLIDING names split
@@ -138,6 +152,76 @@ def support_foot_velocities(
     held = jacobians[np.arange(n), support][..., base]  # (T, 6, 6) the support sole's base block
     base_twist = -np.linalg.solve(held, joint_part[np.arange(n), support][..., None])[..., 0]
     return np.einsum("tfij,tj->tfi", jacobians[..., base], base_twist) + joint_part
+
+
+def sole_jacobians(robot: Robot, configurations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(T, 2, 6, nv) LOCAL_WORLD_ALIGNED sole Jacobians and (T, 2, 3, 3) sole rotations, columns
+    as `FEET`; one pinocchio Jacobian pass per frame."""
+    model = robot.model
+    data = model.createData()  # private: the cached Robot's data may be in use elsewhere
+    frame_ids = [robot.frame_id(name) for name in FEET]
+    n = len(configurations)
+    jacobians = np.empty((n, 2, 6, model.nv))
+    rotations = np.empty((n, 2, 3, 3))
+    for k, q in enumerate(configurations):
+        pin.computeJointJacobians(model, data, q)
+        pin.updateFramePlacements(model, data)
+        for f, frame_id in enumerate(frame_ids):
+            jacobians[k, f] = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
+            rotations[k, f] = data.oMf[frame_id].rotation
+    return jacobians, rotations
+
+
+def authors_sole_velocities(
+    robot: Robot,
+    configurations: np.ndarray,
+    joint_velocities: np.ndarray,
+    sole_positions: np.ndarray,
+) -> np.ndarray:
+    """(T, 2, 6) sole twists [linear, angular] LOCAL_WORLD_ALIGNED at q_i, as the authors' step
+    from q_{i-1} to q_i makes them (module docstring); frame 0, which has no previous state, NaN.
+
+    configurations (T, nq); joint_velocities (T, 26) the study's order, row i the step's sdot_i;
+    sole_positions (T, 2, 3) the sole origins (the support pick's corners hang from them).
+    """
+    jacobians, rotations = sole_jacobians(robot, configurations)
+    base, joints = robot.velocity_order[:6], robot.v_index
+    heights = sole_positions[..., 2] + corner_offsets(rotations, AUTHORS_SOLE_CORNERS)[..., 2].min(
+        axis=-1
+    )
+    n = len(configurations)
+    previous, current = np.arange(n - 1), np.arange(1, n)
+    support = (heights[:-1, 1] < heights[:-1, 0]).astype(int)  # the left on a tie
+    held = jacobians[previous, support]  # (T-1, 6, nv) at q_{i-1}
+    base_rotation = quaternion_xyzw_matrices(configurations[:, 3:7])  # (T, 3, 3)
+    # mixed base twist [p_dot; omega] in world axes -> the free flyer's body twist: R^T each part
+    to_body = np.zeros((n, 6, 6))
+    to_body[:, :3, :3] = to_body[:, 3:, 3:] = np.swapaxes(base_rotation, 1, 2)
+    sdot = np.asarray(joint_velocities, dtype=float)[1:]
+    mixed_block = held[..., base] @ to_body[:-1]
+    joint_twist = np.einsum("tij,tj->ti", held[..., joints], sdot)
+    mixed_twist = -np.linalg.solve(mixed_block, joint_twist[..., None])[..., 0]
+    body_twist = np.einsum("tij,tj->ti", to_body[1:], mixed_twist)  # set at q_i
+    new = jacobians[current]  # (T-1, 2, 6, nv)
+    out = np.full((n, 2, 6), np.nan)
+    out[1:] = np.einsum("tfij,tj->tfi", new[..., base], body_twist) + np.einsum(
+        "tfij,tj->tfi", new[..., joints], sdot
+    )
+    return out
+
+
+def contact_point_velocities(
+    velocities: np.ndarray, rotations: np.ndarray, corners: np.ndarray
+) -> np.ndarray:
+    """(T, 2, 6) the twists of (T, 2, 6) LOCAL_WORLD_ALIGNED sole twists moved to each sole's
+    lowest corner (its linear part v + omega x R c, the angular part unchanged)."""
+    offsets = corner_offsets(rotations, corners)  # (T, 2, C, 3)
+    lowest = np.take_along_axis(
+        offsets, np.argmin(offsets[..., 2], axis=-1)[..., None, None], axis=-2
+    )[..., 0, :]
+    out = velocities.copy()
+    out[..., :3] += np.cross(velocities[..., 3:], lowest)
+    return out
 
 
 def manifold_velocities(model: pin.Model, configurations: np.ndarray, time: np.ndarray):
