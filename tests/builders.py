@@ -219,8 +219,13 @@ def make_trajectory(xy, yaw=0.0, z=0.0, contacts=None, joints=None, **attrs) -> 
 WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100": 100.0}
 
 
+SCENARIO = "authors"  # evaluate.scenario: the authors' test protocol
 # seed medians of a study that agrees with the paper
 AGREEING = {
+    "support_rmse_paper_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9,
+                                        "w100": 15},
+    "support_rmse_paper_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5,
+                                         "w100": 9},
     "support_rmse_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9, "w100": 15},
     "support_rmse_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5, "w100": 9},
     "support_rmse_linear_world_total": {BASELINE: 24, "w0": 14, "w1": 12, "w10": 9, "w20": 10,
@@ -240,6 +245,9 @@ REFERENCE = {
     "label": "data (retargeted, forward walking)", "frames": 500, "min_forward_frames": 250,
     "joint_velocities": "differences",
     "all": {"clips": 82, "used": 16, "metrics": {
+        "support_rmse_paper_linear_total": {"median": 30.5},
+        "support_rmse_paper_angular_total": {"median": 11.2},
+        "support_rmse_contact_point_total": {"median": 12.5},
         "support_rmse_linear_total": {"median": 12.0},
         "support_rmse_linear_world_total": {"median": 13.2},
         "support_rmse_angular_total": {"median": 2.44},
@@ -262,8 +270,8 @@ def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFr
                 offset = 1.0 + 0.01 * (seed - 2)
                 row = {
                     "model": model, "variant": "ground_projected" if model == BASELINE else "full",
-                    "pi_weight": weight, "seed": seed, "scenario": "forward",
-                    "steering": steering, "rollout": f"{model}/{seed}/forward.h5",
+                    "pi_weight": weight, "seed": seed, "scenario": SCENARIO,
+                    "steering": steering, "rollout": f"{model}/{seed}/{SCENARIO}.h5",
                 }  # fmt: skip
                 for metric, by_model in values.items():
                     row[metric] = by_model[model] * offset

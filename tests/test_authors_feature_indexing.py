@@ -48,7 +48,8 @@ WINDOW_INDEXES = list(range(-WINDOW_LENGTH, WINDOW_LENGTH + 2 * WINDOW_STEP, WIN
 # pimann's window sample at offset k of centre c is the authors' velocity list at c + k - 1
 PIMANN_WINDOW_LIST_SHIFT = -1
 # the authors' angular velocity 2 E(q_f) dq/dt differs from pimann's log(R_f R_{f-1}^T)/dt
-# by O(|omega|^3 dt^2) (here < 1e-4 rad/s); a one-frame shift moves it by ~0.1 rad/s
+# by about |omega|^3 dt^2 / 24 (here < 1.2e-4 rad/s at 1.9 rad/s); a one-frame shift moves
+# it by ~0.1 rad/s
 ANGULAR_ATOL = 1e-3
 ATOL = 1e-9
 WINDOW_BLOCKS = ("base_linear_window", "base_angular_window")
@@ -65,7 +66,9 @@ def moving_clip(frames: int = FRAMES, seed: int = 3) -> Trajectory:
         freq = rng.uniform(0.3, 1.5, (3, n))
         phase = rng.uniform(0, 2 * np.pi, (3, n))
         gain = rng.uniform(0.3, 1.0, (3, n)) * amplitude
-        return (gain[:, None] * np.sin(2 * np.pi * freq[:, None] * t[None, :, None] + phase[:, None])).sum(0)
+        return (
+            gain[:, None] * np.sin(2 * np.pi * freq[:, None] * t[None, :, None] + phase[:, None])
+        ).sum(0)
 
     joints = smooth(N_JOINTS, 0.15)
     position = np.stack([0.5 * t, 0.3 * np.sin(1.3 * t), 0.77 + 0.02 * np.sin(5 * t)], axis=1)
@@ -255,5 +258,5 @@ def test_the_authors_angular_velocity_is_pimanns_up_to_the_formula(clip):
          np.stack([-qz, -qy, qx, qw], -1)], axis=1,
     )  # fmt: skip
     authors = 2 * np.einsum("tij,tj->ti", e, np.diff(q, axis=0) / DT)
-    assert np.abs(authors - exact).max() < 0.1 * ANGULAR_ATOL
+    assert np.abs(authors - exact).max() < 0.2 * ANGULAR_ATOL
     assert np.abs(np.diff(exact, axis=0)).max() > 20 * ANGULAR_ATOL

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 
+import pandas as pd
 import pytest
 from builders import AGREEING, REFERENCE, crafted_metrics
 
@@ -48,8 +49,8 @@ def test_claims_hold_on_agreeing_numbers(params):
 
 def test_claims_fail_on_contradicting_numbers(params):
     values = {k: dict(v) for k, v in AGREEING.items()}
-    values["support_rmse_linear_total"].update(w0=6, w1=8, w10=10)  # increasing with w
-    values["support_rmse_angular_total"][("w20")] = 25  # above the baseline
+    values["support_rmse_paper_linear_total"].update(w0=6, w1=8, w10=10)  # increasing with w
+    values["support_rmse_paper_angular_total"][("w20")] = 25  # above the baseline
     values["contact_sole_pitch_max_abs"].update(w0=0.3, w1=0.2, w10=0.1, w20=0.05, w100=0.04)
     values["contact_foot_speed_mean_position"].update(w10=0.25)
     frame = crafted_metrics(values)
@@ -75,29 +76,43 @@ def test_claims_without_baseline_are_not_comparable(params):
     assert claims["C5"] == HOLDS
 
 
-def test_c1_compares_angular_directly_and_linear_in_the_world_representation(params):
+def test_c1_compares_the_authors_metric_with_the_paper(params):
     frame = crafted_metrics()
     c1 = evaluate_claims(frame, params.evaluate)[0]
     assert c1.id == "C1" and c1.status == HOLDS
-    assert "world" in c1.ours and "local_world_aligned" in c1.ours and "velocity-level" in c1.metric
-    # our representation at the paper's number does not help: the world one is x2.2 the paper's
+    assert c1.ours.startswith("baseline: ") and "the authors'" in c1.metric
+    # ours at the paper's number does not help: the authors' metric is x2.2 the paper's
     frame["support_rmse_linear_total"] = 22.88
-    frame["support_rmse_linear_world_total"] = 2.2 * 22.88
+    frame["support_rmse_paper_linear_total"] = 2.2 * 22.88
     c1 = evaluate_claims(frame, params.evaluate)[0]
     assert c1.status == FAILS and "linear x2.20" in c1.reason
     # within a factor 2 both ways: half the paper's angular still holds, a third does not
-    frame["support_rmse_linear_world_total"] = 22.88
-    frame["support_rmse_angular_total"] = 17.74 / 1.9
+    frame["support_rmse_paper_linear_total"] = 22.88
+    frame["support_rmse_paper_angular_total"] = 17.74 / 1.9
     assert evaluate_claims(frame, params.evaluate)[0].status == HOLDS
-    frame["support_rmse_angular_total"] = 17.74 / 3
+    frame["support_rmse_paper_angular_total"] = 17.74 / 3
     assert evaluate_claims(frame, params.evaluate)[0].status == FAILS
+
+
+def test_the_adherent_model_is_the_baseline_where_trained(params):
+    """With an `adherent` model among the rollouts the claims compare with it, and C1 gives
+    the yaw-only variant's numbers beside."""
+    frame = crafted_metrics()
+    adherent = frame[frame["model"] == BASELINE].assign(model="adherent")
+    adherent["support_rmse_paper_linear_total"] = 4.0  # slides less than every PI model
+    claims = {c.id: c for c in evaluate_claims(pd.concat([frame, adherent]), params.evaluate)}
+    assert (
+        claims["C1"].ours.startswith("adherent: ") and "yaw-only variant: 20" in claims["C1"].ours
+    )
+    assert claims["C2"].status == FAILS and claims["C2"].ours.startswith("adherent ")
+    assert evaluate_claims(frame, params.evaluate)[1].status == HOLDS  # the variant: above
 
 
 def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
     frame = crafted_metrics()
     # w=20's median angular RMSE is far below the baseline's, but its worst seed is above the
     # baseline's best seed
-    frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 4, 4, 4, 17.8]
+    frame.loc[_rows(frame, "w20"), "support_rmse_paper_angular_total"] = [4, 4, 4, 4, 17.8]
     # w=10's contact feet: median slower than w=0's, one seed faster than w=0's slowest
     frame.loc[_rows(frame, "w10"), "contact_foot_speed_mean_position"] = [0.1, 0.1, 0.1, 0.1, 0.3]
     claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
@@ -105,7 +120,7 @@ def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
     assert claims["C14"].status == WITHIN_SPREAD
     assert claims["C2"].status == HOLDS
     # medians in the wrong order do not hold at all
-    frame.loc[_rows(frame, "w20"), "support_rmse_angular_total"] = [4, 30, 30, 30, 30]
+    frame.loc[_rows(frame, "w20"), "support_rmse_paper_angular_total"] = [4, 30, 30, 30, 30]
     assert statuses(evaluate_claims(frame, params.evaluate))["C3"] == FAILS
 
 
@@ -129,7 +144,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     values = {k: dict(v) for k, v in AGREEING.items()}
     # every PI model slides more than the baseline linearly (-30 %), less angularly (+70 %):
     # angular "reduced more", yet there is no linear reduction
-    values["support_rmse_linear_total"].update(w0=26, w1=26, w10=26, w20=26)
+    values["support_rmse_paper_linear_total"].update(w0=26, w1=26, w10=26, w20=26)
     frame = crafted_metrics(values)
     position = (frame["model"] == "w10").map({True: 12.0, False: 30.0})
     frame["support_rmse_linear_position_total"] = position
@@ -138,18 +153,19 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     c4 = claims["C4"]
     assert c4.status == FAILS and "no reduction in linear" in c4.reason
     assert "linear -30%" in c4.ours
-    # the failing velocity-level claims name what the position level and the double-support
-    # share measure on the same runs
+    # the failing claims name the double-support share on the same runs (the authors' metric
+    # holds the lower foot: only the other one slides, while both are down), and C2 gives our
+    # stricter measures beside
     for claim in (claims["C2"], c4):
-        assert "position level: baseline 30, w=0 30, w=1 30, w=10 12, w=20 30" in claim.reason
         assert "double support: baseline 0.6, w=0 0.3" in claim.reason
+    assert "position level: baseline 30, w=0 30, w=1 30, w=10 12, w=20 30" in claims["C2"].reason
     assert "position level" not in claims["C3"].reason  # angular: holds, no cause
 
 
 def test_every_claim_names_its_metric(params):
     claims = {c.id: c for c in evaluate_claims(crafted_metrics(), params.evaluate)}
     for claim in ("C1", "C2", "C3", "C4", "C5"):
-        assert "velocity-level" in claims[claim].metric, claim
+        assert "the authors' sliding" in claims[claim].metric, claim
     assert "position-level" in claims["C14"].metric
     assert all(c.metric for c in claims.values())
 
@@ -164,8 +180,11 @@ def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
     assert "**8 of 14 claims hold**" in text  # C2-C5, C14 stand still; C6 fails
     rows = [line for line in text.splitlines() if line.startswith("| ")]
     assert rows[0].startswith("| id |") and rows[1].startswith("| D | data (retargeted")
-    assert "velocity level linear 12 (world 13.2), angular 2.44" in rows[1]
-    assert "the data's joint velocities: the joints' differences" in rows[1]
+    assert (
+        "the authors' metric linear 30.5, angular 11.2; ours: lowest-corner rule, no lag 12, "
+        "position level 12, contact point 12.5 (angular, position level 2.44)" in rows[1]
+    )
+    assert "the joints' first differences (the authors' metric)" in rows[1]
     assert "lift-off share 0.31 (of 0.18 of the contact frames)" in rows[1]
     assert len(rows) == 2 + len(claims)
     for row in rows:  # every row keeps 8 columns: "|" inside a cell is escaped

@@ -11,6 +11,7 @@ import pandas as pd
 import pytest
 from builders import (
     REFERENCE,
+    SCENARIO,
     benchmark_collection,
     crafted_metrics,
     tiny_models,  # noqa: F401
@@ -47,7 +48,7 @@ def test_summary_matches_numpy_on_crafted_data():
     summary = summarise(frame)
     for (model, steering), group in frame.groupby(["model", "steering"]):
         label = "steering" if steering else "nosteering"
-        stats = summary["forward"][label][model]["metrics"]["support_rmse_linear_total"]
+        stats = summary[SCENARIO][label][model]["metrics"]["support_rmse_linear_total"]
         values = group["support_rmse_linear_total"].to_numpy()
         q1, q3 = np.percentile(values, [25, 75])
         assert stats["median"] == pytest.approx(np.median(values))
@@ -55,16 +56,16 @@ def test_summary_matches_numpy_on_crafted_data():
         assert stats["min"] == pytest.approx(values.min())
         assert stats["max"] == pytest.approx(values.max())
         assert stats["n"] == 5
-        walks = summary["forward"][label][model]["metrics"]["walks"]
+        walks = summary[SCENARIO][label][model]["metrics"]["walks"]
         assert walks["mean"] == pytest.approx(group["walks"].mean())
 
 
 def test_representative_seed_is_the_median_one():
     frame = crafted_metrics()
     rows = (frame["model"] == "w10") & ~frame["steering"]
-    frame.loc[rows, "support_rmse_linear_total"] = [5.0, 1.0, 9.0, 4.0, 3.0]
-    assert representative_seed(frame, "w10", "forward", False) == 3  # seed 3: 4.0, the median
-    assert representative_seed(frame, "nope", "forward", False) is None
+    frame.loc[rows, "support_rmse_paper_linear_total"] = [5.0, 1.0, 9.0, 4.0, 3.0]
+    assert representative_seed(frame, "w10", SCENARIO, False) == 3  # seed 3: 4.0, the median
+    assert representative_seed(frame, "nope", SCENARIO, False) is None
 
 
 def test_results_record_provenance(params, tmp_path):
@@ -82,7 +83,7 @@ def test_results_record_provenance(params, tmp_path):
     assert back["steering"].dtype == bool and back["steering"].sum() == len(back) // 2
     assert claims_markdown(claims, info, REFERENCE) == text and "| D | data" in text
     for metric in ("support_rmse_linear_world_total", "support_rmse_linear_position_total"):
-        assert metric in summary["summary"]["forward"]["nosteering"]["w10"]["metrics"]
+        assert metric in summary["summary"][SCENARIO]["nosteering"]["w10"]["metrics"]
 
 
 def test_rollout_and_evaluate_end_to_end(params, tmp_path):
@@ -101,6 +102,7 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
             scenario_names=["short"],
             benchmark_clips=True,
             benchmark_train_clips=1,
+            protocols={},  # tests/test_rollouts.py rolls a protocol out
         ),
         evaluate=dataclasses.replace(params.evaluate, scenario="short"),
     )
@@ -126,9 +128,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert frame["model"].iloc[0] == BASELINE  # baseline rows first
     row = select_rows(frame, "short", True, model="w10", seed=1).iloc[0]
     expected = trajectory_metrics(first, None, short.evaluate, short.contacts)
-    assert row["support_rmse_linear_total"] == pytest.approx(
-        expected["support_rmse_linear_total"], rel=1e-5
-    )
+    for metric in ("support_rmse_linear_total", "support_rmse_paper_linear_total"):
+        assert row[metric] == pytest.approx(expected[metric], rel=1e-5)
     assert set(frame["variant"]) == {"full", "ground_projected"}
     names = sorted(p.stem for p in (results / "timeseries").glob("*.csv"))
     assert names == ["base_baseline", "base_pi", "base_pi_steering", "feet_w10"]
@@ -200,6 +201,7 @@ def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp
         rollout=dataclasses.replace(
             params.rollout, scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]},
             scenario_names=["short"], benchmark_clips=False, benchmark_train_clips=0,
+            protocols={},
         ),
     )  # fmt: skip
     models = tmp_path / "models" / "w10"

@@ -75,7 +75,7 @@ def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
     baseline = [line for line in linear.get_lines() if line.get_label() == "baseline"]
     frame = results.metrics
     rows = (frame["model"] == "baseline") & ~frame["steering"]
-    expected = np.median(frame.loc[rows, "support_rmse_linear_total"])
+    expected = np.median(frame.loc[rows, "support_rmse_paper_linear_total"])
     assert baseline and baseline[0].get_ydata()[0] == pytest.approx(expected)
 
 
@@ -84,7 +84,7 @@ def test_box_plot_shows_the_data_level(params, tmp_path):
     fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     for ax, metric in zip(fig.axes, ("linear", "angular"), strict=True):
         lines = [line for line in ax.get_lines() if line.get_label() == "data"]
-        expected = REFERENCE["all"]["metrics"][f"support_rmse_{metric}_total"]["median"]
+        expected = REFERENCE["all"]["metrics"][f"support_rmse_paper_{metric}_total"]["median"]
         assert len(lines) == 1 and lines[0].get_ydata()[0] == pytest.approx(expected)
     assert "data" in [t.get_text() for t in fig.legends[0].get_texts()]
     results = load_results(crafted_results(tmp_path / "bare", params, data=False))
@@ -175,7 +175,7 @@ def test_box_plot_draws_one_box_per_weight_at_the_seed_median(params, tmp_path):
         assert len(medians) == len(params.evaluate.box_weights) == len(ax.patches)
         for line, weight in zip(medians, params.evaluate.box_weights, strict=True):
             model = unsteered["model"] == f"w{weight:g}"  # not the baseline (its w is 0 too)
-            seeds = unsteered.loc[model, f"support_rmse_{kind}_total"]
+            seeds = unsteered.loc[model, f"support_rmse_paper_{kind}_total"]
             assert line.get_ydata()[0] == pytest.approx(np.median(seeds))
         assert ax.get_xlabel() == "PI weight $w$" and ax.get_ylim()[0] == 0
 

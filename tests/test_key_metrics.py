@@ -11,6 +11,7 @@ import yaml
 from builders import (
     AGREEING,
     REFERENCE,
+    SCENARIO,
     SIM_SUMMARY,  # noqa: F401
     crafted_results,
     crafted_rows,
@@ -61,13 +62,20 @@ def test_key_metrics_values(params, results):
     for claim in claims:
         assert metrics[f"claim.{claim.id}"] == STATUS_CODES[claim.status]
     for model in ("baseline", "w10"):  # crafted seeds: the median seed has the value itself
-        expected = AGREEING["support_rmse_linear_total"][model]
-        assert metrics[f"forward.{model}.sliding_linear"] == pytest.approx(expected)
-    assert metrics["forward.w100.walks"] == 0.0 and metrics["forward.w10.walks"] == 1.0
-    assert metrics["forward.w10.steering.drift_yaw"] == pytest.approx(0.02)
+        for key, column in (
+            ("sliding_linear", "paper_linear"),
+            ("sliding_lowest_corner", "linear"),
+        ):
+            expected = AGREEING[f"support_rmse_{column}_total"][model]
+            assert metrics[f"{SCENARIO}.{model}.{key}"] == pytest.approx(expected)
+    assert metrics[f"{SCENARIO}.w100.walks"] == 0.0 and metrics[f"{SCENARIO}.w10.walks"] == 1.0
+    assert metrics[f"{SCENARIO}.w10.steering.drift_yaw"] == pytest.approx(0.02)
     data = REFERENCE["all"]["metrics"]
     assert metrics["data.sliding_angular"] == pytest.approx(
-        data["support_rmse_angular_total"]["median"]
+        data["support_rmse_paper_angular_total"]["median"]
+    )
+    assert metrics["data.sliding_contact_point"] == pytest.approx(
+        data["support_rmse_contact_point_total"]["median"]
     )
     summary = cf.summarise_following(crafted_rows())
     steered = summary[(summary["model"] == "w10") & summary["steering"]]

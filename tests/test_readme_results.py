@@ -26,11 +26,13 @@ METRICS = {
     "forward.w10.sliding_linear": 26.29,
     "forward.w10.sliding_angular": 8.843,
     "forward.w10.walks": 0.5,
+    "forward.w10.sliding_lowest_corner": 20.1,
     "forward.w1.sliding_linear": 47.92,
     "forward.w1.sliding_angular": 10.84,
     "forward.w1.walks": 1.0,
     "data.sliding_linear": 13.2,
     "data.sliding_angular": 1.45,
+    "data.sliding_contact_point": 14.6,
     "following.data": 0.0,
     "following.w10.nosteering": 0.1667,
     "following.w10.steering": 0.1667,
@@ -49,8 +51,9 @@ def test_block_is_a_table_of_the_numbers_one_row_per_model():
         "w10",
         "retargeted data",
     ]
-    assert "| w10 | 26.3 | 8.84 | 0.5 | 0.167 | 0.167 |" in rows
-    assert "| w1 | 47.9 | 10.8 | 1 | – | – |" in rows  # no following keys: a dash
+    assert "| w10 | 26.3 | 8.84 | 20.1 | – | – | 0.5 | 0.167 | 0.167 |" in rows
+    assert "| w1 | 47.9 | 10.8 | – | – | – | 1 | – | – |" in rows  # no key: a dash
+    assert "| retargeted data | 13.2 | 1.45 | – | – | 14.6 | – | – | – |" in rows
     assert "1 of 14 claims hold" in block and "92% of 13 runs" in block
 
 

@@ -17,7 +17,7 @@ import pytest
 from builders import benchmark_collection, tiny_models, walking_clip
 
 from pimann.core.errors import PimannError
-from pimann.core.params import MotionSegment, StandSegment, load_params
+from pimann.core.params import MotionSegment, ProtocolParams, StandSegment, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
 from pimann.generate.command_script import clip_commands
@@ -40,6 +40,12 @@ from pimann.generate.rollout_layout import (
 )
 from pimann.generate.rollouts import models_record, rollout_scripts
 from pimann.learn.model_files import model_seeds
+
+PROTOCOL = ProtocolParams(
+    script=[MotionSegment(0.6, 0.4, 0.0, 0.0)],
+    unsteered={"command_blend_tau": 0.0, "start_history": "zero"},
+    steered={"k1": 2.0, "goal_factor": 2.5, "command_blend_tau": None},
+)
 
 EVALUATION = (
     "pimann.evaluate.evaluation",
@@ -188,12 +194,15 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
             scenario_names=["short", "stop"],
             benchmark_clips=False,
             benchmark_train_clips=0,
+            protocols={"proto": PROTOCOL},
         ),
     )
     tiny_models(tmp_path / "models" / "w10", 10.0, "full", [0, 1])
     written = run_rollouts(tmp_path / "models" / "w10", tmp_path / "w10", params, workers=1)
-    assert len(written) == 2 * 2 * 2 and (tmp_path / "w10" / "models.json").is_file()
-    for key in (RolloutKey("w10", 1, "stop", True), RolloutKey("w10", 0, "short", False)):
+    assert len(written) == 2 * 3 * 2 and (tmp_path / "w10" / "models.json").is_file()
+    keys = [RolloutKey("w10", 1, "stop", True), RolloutKey("w10", 0, "short", False)]
+    keys += [RolloutKey("w10", 0, "proto", steering) for steering in (False, True)]
+    for key in keys:
         batched = read_trajectory(rollout_path(tmp_path, key))
         alone = generate_file(
             tmp_path / "models" / "w10" / str(key.seed), key.scenario, tmp_path / "alone.h5",
@@ -201,11 +210,42 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
         )  # fmt: skip
         alone = read_trajectory(tmp_path / "alone.h5")
         assert batched.attrs == alone.attrs and batched.source == alone.source
-        assert read_script(batched) == params.rollout.scenarios[key.scenario]
-        assert len(batched) == len(alone) == {"short": 31, "stop": 66}[key.scenario]
+        scripts = {**params.rollout.scenarios, "proto": PROTOCOL.script}
+        assert read_script(batched) == scripts[key.scenario]
+        assert len(batched) == len(alone) == {"short": 31, "stop": 66, "proto": 31}[key.scenario]
+        assert batched.attrs.get("protocol") == ("proto" if key.scenario == "proto" else None)
         for name in ("base_position", "joint_positions", "joint_velocities"):
             np.testing.assert_allclose(getattr(batched, name), getattr(alone, name), atol=1e-5)
         np.testing.assert_array_equal(batched.contacts, alone.contacts)
+
+
+def test_a_protocol_runs_with_the_rollout_keys_it_sets(tmp_path):
+    """The protocol's unsteered way overwrites the future window with the command (tau 0) and
+    starts from zero velocity windows: not the plain unsteered rollout of the same script."""
+    from pimann.generate.generator import generate_file
+
+    params = load_params()
+    params = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(
+            params.rollout, scenarios={**params.rollout.scenarios, "plain": PROTOCOL.script},
+            protocols={"proto": PROTOCOL},
+        ),
+    )  # fmt: skip
+    tiny_models(tmp_path / "models", 10.0, "full", [0])
+    unsteered = params.rollout.for_protocol("proto", False)
+    assert unsteered.command_blend_tau == 0.0 and unsteered.start_history == "zero"
+    assert params.rollout.for_protocol("proto", True).k1 == 2.0
+    runs = {
+        name: generate_file(tmp_path / "models" / "0", name, tmp_path / f"{name}.h5", False, params)
+        for name in ("plain", "proto")
+    }
+    assert runs["proto"].attrs["protocol"] == "proto" and "protocol" not in runs["plain"].attrs
+    gap = np.abs(runs["proto"].joint_positions - runs["plain"].joint_positions).max()
+    assert gap > 1e-4  # the tiny model barely walks; the same keys set by hand give the same:
+    by_hand = dataclasses.replace(params, rollout=dataclasses.replace(unsteered, protocols={}))
+    same = generate_file(tmp_path / "models" / "0", "plain", tmp_path / "h.h5", False, by_hand)
+    np.testing.assert_array_equal(same.joint_positions, runs["proto"].joint_positions)
 
 
 @pytest.mark.parametrize(

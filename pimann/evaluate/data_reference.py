@@ -13,8 +13,9 @@ clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over
 Beside them, where in a stance the data slides (pimann.evaluate.sliding: the shares of the
 linear sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
 
-The retargeted data carries no joint velocities: its velocity level takes the joints' central
-differences (and the base that holds the lower foot still), its position level the base's and
+The retargeted data carries no joint velocities: the authors' metric takes the joints' first
+differences ((s_i - s_{i-1}) / dt, as their features do), our velocity level their central
+differences (and the base that holds the lower foot still), the position level the base's and
 the joints' differences alike.
 """
 
@@ -29,7 +30,7 @@ from pimann.core.parallel import pool_map
 from pimann.core.params import ContactParams, EvaluateParams, Params
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory, iter_collection
-from pimann.evaluate.metrics import SLIDING, aggregate, sliding_frames
+from pimann.evaluate.metrics import PAPER_SLIDING, SLIDING, aggregate, sliding_frames
 from pimann.evaluate.sliding import PHASES, SHARE_METRICS, phase_share_metrics
 from pimann.learn.features import split_sources
 from pimann.learn.motion_classes import CLASSES, motion_classes
@@ -56,9 +57,12 @@ def clip_reference(
         "forward_frames": int(forward.sum()),
         "joint_velocities": trajectory.joint_velocities is not None,
     }
+    stepped = forward.copy()
+    stepped[0] = False  # the authors' metric has no step into frame 0
     for name in SLIDING:
         per_frame = sliding[name].mean(axis=1)  # the frame's share of the left-right mean
-        value = FRAMES * float(per_frame[forward].mean()) if forward.any() else None
+        counted = stepped if name in PAPER_SLIDING else forward
+        value = FRAMES * float(per_frame[counted].mean()) if counted.any() else None
         row[f"support_rmse_{name}_total"] = value
     rms = {name: sliding[name] for name in SHARE_METRICS}
     row.update(phase_share_metrics(rms, sliding["contacts"], trajectory.rate_hz, forward))

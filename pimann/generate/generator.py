@@ -259,12 +259,20 @@ def scenario_of(params: RolloutParams, name: str, params_path: str | Path = DEFA
 
 @dataclasses.dataclass(frozen=True)
 class FileJob:
-    """One rollout file of a model: its scenario name, script, steering switch and path."""
+    """One rollout file of a model: its scenario name, script, steering switch and path, and
+    the protocol of `rollout.protocols` it runs under (None: `rollout` as it is)."""
 
     scenario: str
     script: Sequence[Segment]
     steering: bool
     output: Path
+    protocol: str | None = None
+
+    def rollout_params(self, params: Params) -> RolloutParams:
+        """The rollout params this job runs with."""
+        if self.protocol is None:
+            return params.rollout
+        return params.rollout.for_protocol(self.protocol, self.steering)
 
 
 def _model_rollouts(
@@ -282,36 +290,46 @@ def _model_rollouts(
     from pimann.learn.model_files import META_FILE, load_model
 
     model, layout, stats, meta = load_model(model_dir)
-    standing = StandingPose.nominal()
-    if params.rollout.start_pose == "data":
+
+    def standing_pose(rollout: RolloutParams) -> StandingPose:
+        if rollout.start_pose != "data":
+            return StandingPose.nominal()
         try:
-            standing = StandingPose.from_json(meta.get("standing"))
+            return StandingPose.from_json(meta.get("standing"))
         except (KeyError, TypeError, ValueError) as error:
             raise PimannError(
                 Path(model_dir) / META_FILE, f"standing: not a standing pose ({error!r})"
             ) from None
+
     model_attrs = {
         key: meta[key] for key in ("pi_weight", "seed", "variant") if meta.get(key) is not None
     }
     rate = float(layout.rate_hz)
-    ordered = sorted(jobs, key=lambda job: -len(scenario_steps(job.script, rate)))  # alike lengths
     robot = load_robot()
-    for first in range(0, len(ordered), batch_size):
-        chunk = ordered[first : first + batch_size]
-        specs = [
-            RolloutSpec(
-                list(job.script), job.steering, f"{repo_relative(model_dir)}:{job.scenario}",
-                {"scenario": job.scenario, "model_dir": repo_relative(model_dir),
-                 SCRIPT_ATTR: script_json(job.script), **model_attrs,
-                 "start_pose": standing.origin},
-            )
-            for job in chunk
-        ]  # fmt: skip
-        rollouts = generate_batch(
-            model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.contacts, standing=standing,
-        )  # fmt: skip
-        yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
+    groups: dict[tuple[str | None, bool], list[FileJob]] = {}
+    for job in jobs:  # a protocol's jobs run with its own params, a batch of their own
+        groups.setdefault((job.protocol, job.steering and job.protocol is not None), []).append(job)
+    for group in groups.values():
+        rollout = group[0].rollout_params(params)
+        standing = standing_pose(rollout)
+        ordered = sorted(group, key=lambda job: -len(scenario_steps(job.script, rate)))
+        for first in range(0, len(ordered), batch_size):
+            chunk = ordered[first : first + batch_size]
+            specs = [
+                RolloutSpec(
+                    list(job.script), job.steering, f"{repo_relative(model_dir)}:{job.scenario}",
+                    {"scenario": job.scenario, "model_dir": repo_relative(model_dir),
+                     SCRIPT_ATTR: script_json(job.script), **model_attrs,
+                     "start_pose": standing.origin,
+                     **({"protocol": job.protocol} if job.protocol else {})},
+                )
+                for job in chunk
+            ]  # fmt: skip
+            rollouts = generate_batch(
+                model, layout, stats, specs, rollout, robot,
+                contact_params=params.contacts, standing=standing,
+            )  # fmt: skip
+            yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 
 
 def generate_files(
@@ -341,14 +359,17 @@ def generate_file(
     """`pimann generate MODEL_DIR --scenario NAME -o OUT.h5 [--no-steering]`: written atomically.
 
     `segments`: the script to run under the name `scenario_name` (default: that scenario of
-    rollout.scenarios); recorded in the file's attrs["script"]
-    (pimann.generate.rollouts.script_json).
+    rollout.scenarios, or the protocol of that name of rollout.protocols); recorded in the
+    file's attrs["script"] (pimann.generate.rollouts.script_json).
     """
-    if segments is None:
-        scenario = scenario_of(params.rollout, scenario_name, params_path)
-    else:
+    protocol = None
+    if segments is not None:
         scenario = list(segments)
-    job = FileJob(scenario_name, scenario, bool(steering), Path(output_path))
+    elif scenario_name in params.rollout.protocols:  # run under the protocol's rollout keys
+        scenario, protocol = list(params.rollout.protocols[scenario_name].script), scenario_name
+    else:
+        scenario = scenario_of(params.rollout, scenario_name, params_path)
+    job = FileJob(scenario_name, scenario, bool(steering), Path(output_path), protocol)
     ((_, trajectory),) = _model_rollouts(model_dir, [job], params)
     write_trajectory(output_path, trajectory)
     log.info("wrote %s (%d frames, steering %s)", output_path, len(trajectory), steering)

@@ -5,8 +5,9 @@ One file per run, simple to list and to rerun:
     results/rollouts/<model>/<seed>/<scenario>-<steering|nosteering>.h5
     results/rollouts/<model>/models.json      the trained models' meta (pi_weight, variant, ...)
 
-`<model>` is the training output's folder name (`w10`, `baseline`); `baseline` is the
-ADHERENT-style model (ground-projected features, no physics term). `<scenario>` is a named
+`<model>` is the training output's folder name (`w10`, `baseline`, `adherent`); `baseline` is
+the full model with a yaw-only (ground-projected) base and no physics term, `adherent` the
+ADHERENT baseline (its own features, outputs and rollout; train.adherent). `<scenario>` is a named
 scenario of `rollout.scenario_names` or, with `rollout.benchmark_clips`, `clip_<clip name>`: the
 command-following benchmark's script of one test clip (with `rollout.benchmark_train_clips`,
 `train_<clip name>`: of a training clip; `scenario_split` tells them). Every rollout records the
@@ -37,6 +38,7 @@ if TYPE_CHECKING:
     from pimann.core.trajectory import Trajectory
 
 BASELINE = "baseline"
+ADHERENT = "adherent"  # the ADHERENT baseline's training output (train.adherent)
 MODELS_FILE = "models.json"
 STEERING_LABEL = {True: "steering", False: "nosteering"}
 CLIP_PREFIX = "clip_"  # the benchmark scripts' scenario names: clip_<clip name>

@@ -2,6 +2,9 @@
 and without steering, generated in batches and written in the layout of
 pimann.generate.rollout_layout.
 
+Beside the scripts, each of the authors' test protocols (`rollout.protocols`) under its own
+name, with and without steering, each way with the rollout keys it sets.
+
 The scripts are the named scenarios of `rollout.scenario_names` and, with
 `rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
 features stage's split (pimann.generate.benchmark_clips), with `rollout.benchmark_train_clips` also
@@ -57,7 +60,7 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
 
 
 def _generate_seed(
-    job: tuple[Path, list[tuple[str, list[Segment], bool, Path]], Params],
+    job: tuple[Path, list[tuple[str, list[Segment], bool, Path, str | None]], Params],
 ) -> str | None:
     """One seed's rollouts, generated together in batches
     (pimann.generate.generator.generate_files);
@@ -112,9 +115,13 @@ def run_rollouts(
         "seeds": models_record(models_dir),
     }
     with atomic_path(out_dir) as tmp:
+        runs = [(sc, script, None) for sc, script in scripts.items()] + [
+            (name, protocol.script, name) for name, protocol in params.rollout.protocols.items()
+        ]  # a protocol runs under its own name, with the rollout keys it sets
         jobs = [
-            (folder, [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)))
-                      for sc, script in scripts.items() for st in (False, True)], params)
+            (folder, [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)),
+                       protocol)
+                      for sc, script, protocol in runs for st in (False, True)], params)
             for seed, folder in seeds.items()
         ]  # fmt: skip
         tmp.mkdir()

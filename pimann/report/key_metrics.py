@@ -11,10 +11,11 @@ and stable from run to run (a value that cannot be had is null):
   (`STATUS_CODES`: 1 holds, 0.5 within seed spread, 0.25 holds only with a model standing
   still, 0 does not hold, -1 not comparable);
 - `<scenario>.<model>.<metric>`: medians over the seeds, unsteered, on evaluate.scenario (the
-  paper's forward walk): sliding (support-foot total RMSE, linear and angular) and the share
-  of seeds that walk; and the base drift (max |y|, max |yaw|) of the baseline and the featured
-  PI model (evaluate.pi_weight), unsteered and steered;
-- `data.sliding_linear`, `data.sliding_angular`: the retargeted data's own level;
+  authors' forward-walking test): sliding by the authors' metric (support-foot total RMSE,
+  linear and angular), ours beside (`HEADLINE`), and the share of seeds that walk; and the
+  base drift (max |y|, max |yaw|) of the baseline and the featured PI model
+  (evaluate.pi_weight), unsteered and steered;
+- `data.sliding_*`: the retargeted data's own level of each sliding measure;
 - `following.<model>.<steering>`: the share of motion classes whose every criterion passes
   (pimann.evaluate.command_following), on the held-out split, and `following.data` for the test
   clips themselves;
@@ -32,8 +33,15 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.params import Params
-from pimann.evaluate.claims import FAILS, HOLDS, NOT_COMPARABLE, STANDS_STILL, WITHIN_SPREAD
+from pimann.evaluate.claims import (
+    FAILS,
+    HOLDS,
+    NOT_COMPARABLE,
+    STANDS_STILL,
+    WITHIN_SPREAD,
+)
 from pimann.generate.rollout_layout import (
+    ADHERENT,
     BASELINE,
     HELD_OUT,
     STEERING_LABEL,
@@ -48,10 +56,16 @@ DIGITS = 4  # significant digits: a seed's spread is far wider than the fifth
 STATUS_CODES = {HOLDS: 1.0, WITHIN_SPREAD: 0.5, STANDS_STILL: 0.25, FAILS: 0.0,
                 NOT_COMPARABLE: -1.0}  # fmt: skip
 HEADLINE = {  # key: metrics.csv column, medians per model on the scenario, unsteered
-    "sliding_linear": "support_rmse_linear_total",
-    "sliding_angular": "support_rmse_angular_total",
+    "sliding_linear": "support_rmse_paper_linear_total",  # the authors' metric
+    "sliding_angular": "support_rmse_paper_angular_total",
+    # ours beside it: the lowest-corner rule without the lag, the position level, the
+    # contact point (pimann.evaluate.metrics)
+    "sliding_lowest_corner": "support_rmse_linear_total",
+    "sliding_position": "support_rmse_linear_position_total",
+    "sliding_contact_point": "support_rmse_contact_point_total",
     "walks": "walks",
 }
+SLIDING_KEYS = [key for key in HEADLINE if key.startswith("sliding_")]
 DRIFT = {"drift_y": "drift_y_max_abs", "drift_yaw": "drift_yaw_max_abs"}
 
 Number = float | int | None
@@ -87,7 +101,8 @@ def claim_metrics(statuses: dict[str, str]) -> dict[str, Number]:
 def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
     """Medians per model of the headline metrics on evaluate.scenario, and the drifts."""
     scenario = params.evaluate.scenario
-    models = [BASELINE, *pi_models(frame).values()] if len(frame) else []
+    adherent = [ADHERENT] if len(frame) and (frame["model"] == ADHERENT).any() else []
+    models = [*adherent, BASELINE, *pi_models(frame).values()] if len(frame) else []
     out: dict[str, Number] = {}
     for model in models:
         rows = select_rows(frame, scenario, False, model=model)
@@ -109,7 +124,7 @@ def data_metrics(summary: dict[str, Any]) -> dict[str, Number]:
     metrics = subset.get("metrics") or {}
     return {
         f"data.{key}": _number((metrics.get(HEADLINE[key]) or {}).get("median"))
-        for key in ("sliding_linear", "sliding_angular")
+        for key in SLIDING_KEYS
     }
 
 
