@@ -36,6 +36,7 @@ from pimann.evaluate.claims import (
 )
 from pimann.evaluate.metrics import aggregate
 from pimann.generate.rollout_layout import (
+    ADHERENT,
     BASELINE,
     MODELS_FILE,
     STEERING_LABEL,
@@ -117,8 +118,9 @@ def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) 
 
 
 def sort_rows(frame: pd.DataFrame) -> pd.DataFrame:
-    """Baseline first, then PI models by weight; seeds, scenarios, unsteered first."""
-    order = frame.assign(_b=frame["model"] != BASELINE)
+    """The baselines first (ADHERENT, then the yaw-only variant), then PI models by weight;
+    seeds, scenarios, unsteered first."""
+    order = frame.assign(_b=frame["model"].map({ADHERENT: 0, BASELINE: 1}).fillna(2))
     order = order.sort_values(["_b", "pi_weight", "model", "seed", "scenario", "steering"])
     return order.drop(columns="_b").reset_index(drop=True)
 
@@ -172,9 +174,10 @@ def timeseries_selection(frame: pd.DataFrame, evaluate: EvaluateParams) -> dict[
     scenario = evaluate.scenario
     models = pi_models(frame)
     chosen: dict[str, RolloutKey] = {}
-    seed = representative_seed(frame, BASELINE, scenario, False)
+    baseline = ADHERENT if (frame["model"] == ADHERENT).any() else BASELINE  # the paper's
+    seed = representative_seed(frame, baseline, scenario, False)
     if seed is not None:
-        chosen["base_baseline"] = RolloutKey(BASELINE, seed, scenario, False)
+        chosen["base_baseline"] = RolloutKey(baseline, seed, scenario, False)
     focus = models.get(float(evaluate.pi_weight))
     seed = None if focus is None else representative_seed(frame, focus, scenario, False)
     if seed is not None:
