@@ -173,7 +173,7 @@ def test_what_evaluate_selects_for_the_figures_and_claims_loads_under_evaluate()
     """evaluate's choices for the figures and claims (the scenario, the weights compared, the
     foot rollouts, the drift factor) load from its own section in either profile; figures keeps
     the style alone."""
-    selection = {"scenario": "forward", "box_weights": [0.0, 1.0, 10.0, 20.0],
+    selection = {"scenario": "authors", "box_weights": [0.0, 1.0, 10.0, 20.0],
                  "large_weight": 100.0, "foot_height_weights": [0.0, 10.0],
                  "foot_steering": False, "drift_reduction": 0.5}  # fmt: skip
     for profile in ("quick", "paper"):
@@ -195,3 +195,28 @@ def test_the_profile_can_be_chosen_by_the_caller(tmp_path, raw):
     paper = load_params(path, profile="paper")
     assert paper.profile == "paper" and paper.train.epochs == raw["train"]["epochs"]
     assert load_params(path).train.epochs == raw["profiles"]["quick"]["train.epochs"]
+
+
+@pytest.mark.parametrize(
+    "way, change, message",
+    [("unsteered", {"k9": 1.0}, r"protocols\.authors\.unsteered\.k9: not a protocol key"),
+     ("steered", {"k1": -1.0}, r"protocols\.authors\.steered: .*k1"),
+     ("steered", {"scenarios": {}}, r"protocols\.authors\.steered\.scenarios: not a protocol")],
+)  # fmt: skip
+def test_a_protocol_key_is_checked_by_name_and_range(tmp_path, raw, way, change, message):
+    raw["rollout"]["protocols"]["authors"][way] = change
+    with pytest.raises(PimannError, match=message):
+        load_params(_write(tmp_path, raw))
+
+
+def test_a_protocol_sets_only_its_keys(raw, tmp_path):
+    params = load_params(_write(tmp_path, raw))
+    unsteered = params.rollout.for_protocol("authors", False)
+    steered = params.rollout.for_protocol("authors", True)
+    assert (unsteered.command_blend_tau, unsteered.start_history) == (0.0, "zero")
+    assert (steered.k0, steered.k1, steered.goal_factor) == (0.2, 2.0, 2.5)
+    assert steered.command_blend_tau is None and steered.planar_steering
+    assert unsteered.k1 == params.rollout.k1 and not unsteered.protocols  # the rest as is
+    raw["rollout"]["protocols"]["forward"] = raw["rollout"]["protocols"]["authors"]
+    with pytest.raises(PimannError, match="protocols.forward is also a scenario"):
+        load_params(_write(tmp_path, raw))

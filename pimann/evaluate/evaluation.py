@@ -101,9 +101,12 @@ def _metrics_job(job: tuple[Path, Any]) -> dict[str, Any]:
 
 
 def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) -> pd.DataFrame:
-    """One row per rollout: the key columns, then every `trajectory_metrics` value."""
+    """One row per rollout: the key columns, then every `trajectory_metrics` value (the
+    ADHERENT baseline's with `train.adherent` only)."""
     root = Path(rollouts_dir)
     rollouts = find_rollouts(root)
+    if not params.train.adherent:  # not measured: the yaw-only variant is the baseline
+        rollouts = [(key, path) for key, path in rollouts if key.model != ADHERENT]
     results = pool_map(
         _metrics_job,
         [(path, params.evaluate, params.contacts) for _, path in rollouts],

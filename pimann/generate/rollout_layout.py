@@ -193,8 +193,8 @@ def select_rows(frame: pd.DataFrame, scenario: str, steering: bool, **where: Any
 
 
 def pi_models(frame: pd.DataFrame) -> dict[float, str]:
-    """{pi_weight: model name} of the PI models (every model but the baseline)."""
-    rows = frame[frame["model"] != BASELINE].drop_duplicates("model")
+    """{pi_weight: model name} of the PI models (every model but the two baselines)."""
+    rows = frame[~frame["model"].isin([BASELINE, ADHERENT])].drop_duplicates("model")
     return {float(w): str(m) for w, m in sorted(zip(rows["pi_weight"], rows["model"], strict=True))}
 
 
