@@ -215,12 +215,10 @@ def test_state_blocks_match_the_authors(which, clip, layout, pimann_features):
     assert not errors, "\n".join(errors)
 
 
-@pytest.mark.parametrize("which", ["x", "y"])
-def test_windows_are_the_authors_lists_one_index_earlier(which, clip, layout, pimann_features):
-    """The input window (centre i, base frame at i) and the output window (centre i + 1, base
-    frame at i + 1, offsets >= 0): the authors' rotation and centres, their velocity lists read
-    at c + k - 1 (differences ending at c + k)."""
-    authors = authors_features(clip, PIMANN_WINDOW_LIST_SHIFT)[which == "y"]
+def window_errors(which, clip, layout, pimann_features, *shift):
+    """The window blocks of x or y where pimann's columns differ from the authors' lists (read
+    `shift` indices earlier), and the blocks compared."""
+    authors = authors_features(clip, *shift)[which == "y"]
     pimann = pimann_features[which == "y"]
     steps = common(pimann, authors)
     slices = layout.x_slices if which == "x" else layout.y_slices
@@ -228,6 +226,15 @@ def test_windows_are_the_authors_lists_one_index_earlier(which, clip, layout, pi
     errors = block_errors(
         pimann, {i: authors[i] for i in steps}, slices, layout.names(which), blocks
     )
+    return errors, blocks
+
+
+@pytest.mark.parametrize("which", ["x", "y"])
+def test_windows_are_the_authors_lists_one_index_earlier(which, clip, layout, pimann_features):
+    """The input window (centre i, base frame at i) and the output window (centre i + 1, base
+    frame at i + 1, offsets >= 0): the authors' rotation and centres, their velocity lists read
+    at c + k - 1 (differences ending at c + k)."""
+    errors, _ = window_errors(which, clip, layout, pimann_features, PIMANN_WINDOW_LIST_SHIFT)
     assert not errors, "\n".join(errors)
 
 
@@ -235,14 +242,7 @@ def test_windows_are_the_authors_lists_one_index_earlier(which, clip, layout, pi
 def test_windows_differ_from_the_authors_literal_lists(which, clip, layout, pimann_features):
     """The documented deviation (SPEC section 4) is real: read at the authors' own list
     indices, every window block differs (by about one frame of acceleration)."""
-    authors = authors_features(clip)[which == "y"]
-    pimann = pimann_features[which == "y"]
-    steps = common(pimann, authors)
-    slices = layout.x_slices if which == "x" else layout.y_slices
-    blocks = WINDOW_BLOCKS if which == "x" else FUTURE_BLOCKS
-    errors = block_errors(
-        pimann, {i: authors[i] for i in steps}, slices, layout.names(which), blocks
-    )
+    errors, blocks = window_errors(which, clip, layout, pimann_features)
     assert len(errors) == len(blocks), "\n".join(errors)
 
 

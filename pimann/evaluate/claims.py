@@ -70,8 +70,7 @@ RULES = [
     "the feet).",
     "**does not hold**: the medians do not order as claimed.",
     f"C1: holds when the baseline's median is within a factor {C1_FACTOR:g} of the paper's "
-    "number, both parts (angular directly; linear in the authors' world representation). C4 "
-    "and C9's trend use the seed medians.",
+    "number, both parts of the authors' metric. C4 and C9's trend use the seed medians.",
     "The authors' metric (their rollout's advance(), step by step): the support foot (lowest "
     "of their corners), its Jacobian and the base twist that holds it still at the previous "
     "state with the new predicted joint velocities, both soles' velocities read at the new "

@@ -39,9 +39,7 @@ future half standing still too.
 from __future__ import annotations
 
 import dataclasses
-import json
 import logging
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -49,10 +47,8 @@ import numpy as np
 import torch
 from scipy.spatial.transform import Rotation
 
-from pimann.core.atomic import atomic_path
 from pimann.core.contacts import SchmittTrigger
 from pimann.core.errors import PimannError
-from pimann.core.parallel import pool_map
 from pimann.core.params import ContactParams, Params, Segment
 from pimann.core.paths import repo_relative
 from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
@@ -60,13 +56,12 @@ from pimann.core.rotations import rot_z, rotation_rpy
 from pimann.core.trajectory import Trajectory, write_trajectory
 from pimann.generate.command_script import ScriptSteps
 from pimann.generate.rollout_layout import (
-    MODELS_FILE,
     SCRIPT_ATTR,
     RolloutKey,
     rollout_path,
     script_json,
 )
-from pimann.generate.rollouts import models_record, rollout_scripts
+from pimann.generate.rollouts import rollout_scripts, write_seed_rollouts
 from pimann.learn.adherent import (
     AdherentLayout,
     BodyFrames,
@@ -75,7 +70,6 @@ from pimann.learn.adherent import (
 )
 from pimann.learn.adherent_train import load_adherent_model
 from pimann.learn.feature_layout import Normalisation
-from pimann.learn.model_files import model_seeds
 from pimann.learn.standing import StandingPose
 
 log = logging.getLogger(__name__)
@@ -372,26 +366,11 @@ def run_adherent_rollouts(
 ) -> list[Path]:
     """Every seed of models_dir x every script of `adherent_runs`, without steering, into
     out_dir/<seed>/<scenario>-nosteering.h5 and out_dir/models.json, written atomically."""
-    models_dir, out_dir = Path(models_dir), Path(out_dir)
-    seeds = model_seeds(models_dir)
     scripts = adherent_runs(params)
-    record = {"profile": params.profile, "models_dir": models_dir.name,
-              "seeds": models_record(models_dir)}  # fmt: skip
-    with atomic_path(out_dir) as tmp:
-        jobs = [
-            (folder, {sc: (script, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, False)))
-                      for sc, script in scripts.items()}, params)
-            for seed, folder in seeds.items()
-        ]  # fmt: skip
-        tmp.mkdir()
-        for seed in seeds:
-            (tmp / str(seed)).mkdir()
-        failures = pool_map(_seed_files, jobs, workers, f"rollouts {out_dir.name}", "seeds")
-        record["failed"] = {str(s): e for s, e in zip(seeds, failures, strict=True) if e}
-        for seed, error in record["failed"].items():
-            log.warning("rollouts of %s seed %s failed: %s", models_dir.name, seed, error)
-            shutil.rmtree(tmp / seed)
-        if len(record["failed"]) == len(seeds):
-            raise PimannError(models_dir, f"every seed failed; first: {failures[0]}")
-        (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
-    return sorted(out_dir.glob("*/*.h5"))
+
+    def seed_job(tmp: Path, seed: int, folder: Path) -> tuple:
+        files = {sc: (script, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, False)))
+                 for sc, script in scripts.items()}  # fmt: skip
+        return folder, files, params
+
+    return write_seed_rollouts(models_dir, out_dir, params, seed_job, _seed_files, workers)

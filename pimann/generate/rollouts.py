@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import logging
 import shutil
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -106,28 +107,43 @@ def run_rollouts(
     batch (pimann.generate.batch_generate). Written into `out_dir` (= results/rollouts/<model>) as a
     whole, atomically.
     """
+    scripts = rollout_scripts(params)
+    runs = [(sc, script, None) for sc, script in scripts.items()] + [
+        (name, protocol.script, name) for name, protocol in params.rollout.protocols.items()
+    ]  # a protocol runs under its own name, with the rollout keys it sets
+
+    def seed_job(tmp: Path, seed: int, folder: Path) -> tuple:
+        files = [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)),
+                  protocol) for sc, script, protocol in runs for st in (False, True)]  # fmt: skip
+        return folder, files, params
+
+    return write_seed_rollouts(models_dir, out_dir, params, seed_job, _generate_seed, workers)
+
+
+def write_seed_rollouts(
+    models_dir: str | Path,
+    out_dir: str | Path,
+    params: Params,
+    seed_job: Callable[[Path, int, Path], Any],
+    generate_seed: Callable[[Any], str | None],
+    workers: int,
+) -> list[Path]:
+    """Each seed's rollouts by `generate_seed(seed_job(tmp, seed, model folder))` (an error
+    naming the file, or None), `workers` processes, into `out_dir` as a whole, atomically, with
+    `MODELS_FILE`: the models' meta and the seeds that failed (recorded; the others go on)."""
     models_dir, out_dir = Path(models_dir), Path(out_dir)
     seeds = model_seeds(models_dir)
-    scripts = rollout_scripts(params)
     record = {
         "profile": params.profile,
         "models_dir": models_dir.name,
         "seeds": models_record(models_dir),
     }
     with atomic_path(out_dir) as tmp:
-        runs = [(sc, script, None) for sc, script in scripts.items()] + [
-            (name, protocol.script, name) for name, protocol in params.rollout.protocols.items()
-        ]  # a protocol runs under its own name, with the rollout keys it sets
-        jobs = [
-            (folder, [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)),
-                       protocol)
-                      for sc, script, protocol in runs for st in (False, True)], params)
-            for seed, folder in seeds.items()
-        ]  # fmt: skip
+        jobs = [seed_job(tmp, seed, folder) for seed, folder in seeds.items()]
         tmp.mkdir()
         for seed in seeds:
             (tmp / str(seed)).mkdir()
-        failures = pool_map(_generate_seed, jobs, workers, f"rollouts {out_dir.name}", "seeds")
+        failures = pool_map(generate_seed, jobs, workers, f"rollouts {out_dir.name}", "seeds")
         record["failed"] = {
             str(seed): error for seed, error in zip(seeds, failures, strict=True) if error
         }

@@ -149,9 +149,12 @@ def _key_numbers(metrics: dict[str, Any]) -> str:
     header, rows = _per_model(metrics)
     others = {k: v for k, v in metrics.items() if k.startswith(("data.", "sim."))}
     return (
-        "<p>Medians over the seeds, unsteered (sliding: support-foot total RMSE, a sum over "
-        "the frames; walks: the share of seeds that walk); following: the share of motion "
-        "classes passing every criterion.</p>"
+        "<p>Medians over the seeds, unsteered. Sliding: support-foot total RMSE, a sum over "
+        "the steps; <b>sliding_linear and sliding_angular are the paper's</b> (the authors' "
+        "metric, docs/metrics.md); sliding_lowest_corner, sliding_position and "
+        "sliding_contact_point are ours beside it, each with the data's level (data.*). "
+        "Walks: the share of seeds that walk; following: the share of motion classes passing "
+        "every criterion.</p>"
         + _table(header, rows)
         + "<p>"
         + ", ".join(f"{html.escape(k)} {_cell(v)}" for k, v in others.items())
