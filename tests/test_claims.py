@@ -219,3 +219,16 @@ def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
     (c9,) = [c for c in claims if c.id == "C9"]
     named = f"train.pi_gradient {pi_gradient} holds the configuration" in c9.reason
     assert named == ("joints" in _HELD[pi_gradient]) == (pi_gradient in CONFIGURATION_HELD)
+
+
+def test_c5_names_a_reduction_that_comes_without_the_physics_term(params):
+    """w=0 (no L_B) below the baseline while sliding does not fall with w: C5's reason says the
+    reduction is not the physics term's; with w=0 above the baseline it says nothing of it."""
+    values = {k: dict(v) for k, v in AGREEING.items()}
+    values["support_rmse_paper_linear_total"].update(w0=6, w1=8, w10=10)  # grows with w
+    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate) if c.id == "C5"]
+    assert c5[0].status == FAILS
+    assert "w=0, trained without L_B, already slides below baseline (6 / 6" in c5[0].reason
+    values["support_rmse_paper_linear_total"].update(w0=30)  # above the baseline's 20
+    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate) if c.id == "C5"]
+    assert "without L_B" not in c5[0].reason

@@ -462,9 +462,26 @@ def _decreasing_up_to(data: SeedData, evaluate: EvaluateParams) -> Claim:
         reason="each w's seeds below the previous w's, both parts" if status == HOLDS
         else f"{' and '.join(failing)}: "
         + ("medians decrease, seed ranges overlap" if status == WITHIN_SPREAD
-           else "medians not strictly decreasing"),
+           else "medians not strictly decreasing") + _without_physics(data, weights[0]),
     )  # fmt: skip
     return stands_still(data, claim, [(data.model(w), False) for w in weights[1:]])
+
+
+def _without_physics(data: SeedData, smallest: float) -> str:
+    """Where the smallest weight is 0 (no L_B) and already below the baseline, both parts:
+    the reduction the claims credit to the physics term comes without it ('' otherwise)."""
+    if smallest != 0:
+        return ""
+    pairs = [(data.median(data.model(0), False, _rmse(k)), data.median(data.baseline, False,
+              _rmse(k))) for k in ("linear", "angular")]  # fmt: skip
+    if any(a is None or b is None or a >= b for a, b in pairs):
+        return ""
+    (lin, lin_b), (ang, ang_b) = pairs
+    return (
+        f"; w=0, trained without L_B, already slides below {data.baseline} ({fmt(lin)} / "
+        f"{fmt(ang)} against {fmt(lin_b)} / {fmt(ang_b)}): the reduction is not the physics "
+        "term's"
+    )
 
 
 WALK_METRIC = (
