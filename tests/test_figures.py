@@ -82,6 +82,9 @@ def test_box_plot_shows_each_weight_and_the_baseline(params, tmp_path):
 def test_box_plot_shows_the_data_level(params, tmp_path):
     results = load_results(crafted_results(tmp_path / "results", params))
     fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
+    for ax, paper in zip(fig.axes, (22.88, 17.74), strict=True):  # the paper's baseline
+        lines = [line for line in ax.get_lines() if line.get_label() == "paper's baseline"]
+        assert len(lines) == 1 and lines[0].get_ydata()[0] == paper
     for ax, metric in zip(fig.axes, ("linear", "angular"), strict=True):
         lines = [line for line in ax.get_lines() if line.get_label() == "data"]
         expected = REFERENCE["all"]["metrics"][f"support_rmse_paper_{metric}_total"]["median"]
@@ -114,7 +117,7 @@ def test_rmse_axis_says_what_is_summed(params, tmp_path):
     results.metrics["frames"] = 501  # metrics.csv's column: 10 s at 50 Hz, both ends
     fig = FIGURES["pi_weight_comparison"](results, params.figures, params.evaluate)
     label = fig.axes[0].get_ylabel().replace("\n", " ")
-    assert label == "total RMSE: sum of per-frame RMS over 501 frames"
+    assert label == "total RMSE: sum of per-step RMS over 500 steps"
     assert [ax.get_title() for ax in fig.axes] == [
         "linear (m/s, summed)",
         "angular (rad/s, summed)",
