@@ -364,10 +364,13 @@ def _baseline_magnitude(data: SeedData) -> Claim:
             f" (the yaw-only variant: {fmt(data.median(BASELINE, False, _rmse('linear')))}, "
             f"{fmt(data.median(BASELINE, False, _rmse('angular')))})"
         )
+    still = data.still_seeds(baseline, False)
     claim = dataclasses.replace(
         claim, ours=text, status=FAILS if off else HOLDS,
-        reason=f"{', '.join(off)} the paper's: outside a factor {C1_FACTOR:g}" if off
-        else f"both within a factor {C1_FACTOR:g} of the paper's",
+        reason=(f"{', '.join(off)} the paper's: outside a factor {C1_FACTOR:g}" if off
+                else f"both within a factor {C1_FACTOR:g} of the paper's")
+        + (f"; measured on {baseline} seeds {', '.join(map(str, still))} that do not walk "
+           "(travel < walk_distance or no steps)" if off and still else ""),
     )  # fmt: skip
     return stands_still(data, claim, [(baseline, False)])
 
