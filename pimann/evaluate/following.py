@@ -310,8 +310,8 @@ def following_markdown(rows: pd.DataFrame, summary: pd.DataFrame, info: dict[str
         f"{cf.DRIFT_LIMIT_DEG:g}° (last {cf.DRIFT_WINDOW_S:g} s against the first).",
         "",
         "Sliding: the support feet's linear RMSE per frame x 500 (the paper's 10 s test), at "
-        "the velocity level (the authors' code: the predicted joint velocities move the feet, "
-        "the base holds the lower one still) and the position level (the poses alone: what a "
+        "our lowest-corner velocity level (the predicted joint velocities move the feet, the "
+        "base holds the lower one still) and the position level (the poses alone: what a "
         "robot would track); the data's levels of the class in brackets (its joint velocities: "
         "the joints' differences).",
         "",

@@ -1,26 +1,28 @@
 """The paper's evaluation of a trajectory (paper Sec. IV): support-foot sliding, drift, foot pitch.
 
-Support-foot velocity RMSE, as the authors compute it: at each frame where a foot is in
-contact, the RMS over the 3 linear (resp. 3 angular) components of that sole's velocity in the
-inertial frame; summed over the trajectory per foot; left and right sums averaged ("total
-RMSE"). The sum grows with the number of frames, so it compares trajectories of equal length
-and rate only (the paper: 10 s at 50 Hz); the per-contact-frame mean is reported beside it.
+Support-foot velocity RMSE: at each step where a foot is in contact, the RMS over the 3 linear
+(resp. 3 angular) components of that sole's velocity; summed over the trajectory per foot;
+left and right sums averaged ("total RMSE"). The sum grows with the number of frames, so it
+compares trajectories of equal length and rate only (the paper: 10 s at 50 Hz, 500 steps).
 
-Two levels: the velocity level (the authors' code, `support_rmse_<linear|angular>_*`) moves
-the joints at the file's joint velocities (a rollout's: the network's predicted ones; none:
-central finite differences of the joints) and the base so that the lowest-corner foot stays
-still (pimann.evaluate.sliding): the support sole never slides there, the other one slides
-as the joint velocities move it while both are down; the position level
-(`support_rmse_<part>_position_*`) takes every velocity, the base's too, from central finite
-differences of q on the configuration manifold (`pinocchio.difference`): whether the feet of
-the trajectory a robot would track move. The linear part in `evaluate.foot_velocity_frame`:
-LOCAL_WORLD_ALIGNED (the sole origin's velocity in world axes, the paper's text) or WORLD
-(inertial-fixed, the authors' code: the velocity of the point at the world origin,
-v - omega x p); the WORLD linear part is always reported too
-(`support_rmse_linear[_position]_world_*`); the angular part is the same in both. Both levels'
-linear part are also reported with the authors' contact rule (`*_origin_contacts_*`): the same
-trigger on the sole origin's height instead of the lowest corner's, so a sole tipped onto its
-heel or toe is not counted down.
+The authors' metric (`support_rmse_paper_<linear|angular>_*`, the claims'): their rollout's
+step from q_{i-1} to q_i (pimann.evaluate.sliding.authors_sole_velocities: support foot,
+Jacobian and base twist at the previous state, the soles read at the new one, linear part
+inertial-fixed), feet counted by the trigger on their sole origin's height as their rollout
+runs it (both on at the start). Ours beside it: the lowest-corner velocity level
+(`support_rmse_<linear|angular>_*`) moves the joints at the file's joint velocities (a
+rollout's: the network's predicted ones; none: central finite differences of the joints) and
+the base so that the lowest-corner foot stays still at the same frame: the support sole never
+slides there, the other one slides as the joint velocities move it while both are down; the
+position level (`support_rmse_<part>_position_*`) takes every velocity, the base's too, from
+central finite differences of q on the configuration manifold (`pinocchio.difference`):
+whether the feet of the trajectory a robot would track move; the contact point
+(`support_rmse_contact_point_*`) is the position level's velocity of each sole's lowest
+corner. Our linear parts in `evaluate.foot_velocity_frame`: LOCAL_WORLD_ALIGNED (the sole
+origin's velocity in world axes) or WORLD (inertial-fixed: the velocity of the point at the
+world origin, v - omega x p); the WORLD linear part is always reported too
+(`support_rmse_linear[_position]_world_*`); the angular part is the same in both. Our linear
+parts are also reported with the sole-origin contact rule (`*_origin_contacts_*`).
 
 Foot-skating ratio: pimann.evaluate.sliding.
 
