@@ -12,7 +12,12 @@ import pytest
 from builders import CONTACT_PARAMS, EVALUATE_PARAMS
 from test_metrics import FRAMES, SQRT3, stance_trajectory
 
-from pimann.core.contacts import FEET, contacts_from_heights, trajectory_configurations
+from pimann.core.contacts import (
+    FEET,
+    contacts_from_heights,
+    foot_kinematics,
+    trajectory_configurations,
+)
 from pimann.core.robot import JOINT_NAMES, corner_offsets
 from pimann.evaluate.metrics import sliding_frames, trajectory_metrics
 from pimann.evaluate.sliding import AUTHORS_SOLE_CORNERS, authors_sole_velocities, sole_jacobians
@@ -93,8 +98,8 @@ def test_the_lag_residual_is_the_support_jacobians_change(robot):
             joint_positions=np.tile(base.joint_positions[0], (n, 1)), joint_velocities=sdot,
         )  # fmt: skip
         q = trajectory_configurations(robot, trajectory)
-        positions = np.array([[robot.frame_placement(qk, f).translation for f in FEET] for qk in q])
-        velocities = authors_sole_velocities(robot, q, sdot, positions)
+        feet = foot_kinematics(robot, q)
+        velocities = authors_sole_velocities(robot, q, sole_jacobians(robot, q), sdot, feet)
         assert np.isnan(velocities[0]).all()
         for i in range(1, n):
             jacobians, support = _support_jacobians(robot, q[i - 1])
@@ -189,5 +194,5 @@ def test_support_pick_uses_the_authors_corners(robot):
     rotation = pin.utils.rotate("y", -0.4)
     lowest = corner_offsets(rotation[None], AUTHORS_SOLE_CORNERS)[0][:, 2].min()
     assert lowest == pytest.approx(-0.08 * np.sin(0.4), abs=1e-12)
-    jacobians, _ = sole_jacobians(robot, robot.standing_configuration()[None])
+    jacobians = sole_jacobians(robot, robot.standing_configuration()[None])
     assert jacobians.shape == (1, 2, 6, robot.model.nv)

@@ -9,7 +9,7 @@ import pytest
 from builders import random_configuration
 
 from pimann.core.contacts import FEET
-from pimann.evaluate.sliding import support_foot_velocities
+from pimann.evaluate.sliding import sole_jacobians, support_foot_velocities
 
 
 def _moved(robot, q, joint_velocities, step):
@@ -24,7 +24,9 @@ def test_support_sole_still_and_the_other_relative_to_it(robot, rng, support):
     q = random_configuration(robot, rng)
     joint_velocities = rng.normal(size=len(robot.v_index))
     heights = np.array([[0.0, 0.1]]) if support == 0 else np.array([[0.1, 0.0]])
-    (twists,) = support_foot_velocities(robot, q[None], joint_velocities[None], heights)
+    (twists,) = support_foot_velocities(
+        robot, sole_jacobians(robot, q[None]), joint_velocities[None], heights
+    )
     np.testing.assert_allclose(twists[support], 0.0, atol=1e-10)
 
     # reference: the support sole fixed in the world where it is at q, the other sole placed
@@ -49,11 +51,13 @@ def test_support_sole_still_and_the_other_relative_to_it(robot, rng, support):
 
 def test_still_joints_leave_both_soles_still_and_the_support_follows_the_heights(robot, rng):
     q = np.array([random_configuration(robot, rng) for _ in range(3)])
-    still = support_foot_velocities(robot, q, np.zeros((3, len(robot.v_index))), np.zeros((3, 2)))
+    still = support_foot_velocities(
+        robot, sole_jacobians(robot, q), np.zeros((3, len(robot.v_index))), np.zeros((3, 2))
+    )
     assert np.abs(still).max() == 0.0
     joint_velocities = rng.normal(size=(3, len(robot.v_index)))
     heights = np.array([[0.0, 0.1], [0.2, 0.05], [0.0, 0.0]])  # left, right, a tie: the left
-    twists = support_foot_velocities(robot, q, joint_velocities, heights)
+    twists = support_foot_velocities(robot, sole_jacobians(robot, q), joint_velocities, heights)
     for k, support in enumerate([0, 1, 0]):
         np.testing.assert_allclose(twists[k, support], 0.0, atol=1e-10)
         assert np.abs(twists[k, 1 - support]).max() > 0.1

@@ -62,6 +62,7 @@ from pimann.evaluate.sliding import (
     manifold_velocities,
     phase_share_metrics,
     skating_ratio,
+    sole_jacobians,
     support_foot_velocities,
 )
 
@@ -189,10 +190,11 @@ def analyse(
         step_velocities[1:] = (
             np.diff(configurations[:, robot.q_index], axis=0) / np.diff(time)[:, None]
         )
+    jacobians = sole_jacobians(robot, configurations)
     levels = {
-        "velocity": support_foot_velocities(robot, configurations, joint_velocities, feet.heights),
+        "velocity": support_foot_velocities(robot, jacobians, joint_velocities, feet.heights),
         "position": feet.velocities,
-        "authors": authors_sole_velocities(robot, configurations, step_velocities, feet.positions),
+        "authors": authors_sole_velocities(robot, configurations, jacobians, step_velocities, feet),
         "contact_point": contact_point_velocities(feet.velocities, feet.rotations, SOLE_CORNERS),
     }
     feet.velocities = in_representation(

@@ -44,7 +44,7 @@ import math
 import numpy as np
 import pinocchio as pin
 
-from pimann.core.contacts import FEET
+from pimann.core.contacts import FEET, FootKinematics, lowest_corner_heights
 from pimann.core.params import EvaluateParams
 from pimann.core.robot import Robot, corner_offsets
 from pimann.core.rotations import quaternion_xyzw_matrices
@@ -127,68 +127,55 @@ def phase_share_metrics(
     return out
 
 
-def support_foot_velocities(
-    robot: Robot, configurations: np.ndarray, joint_velocities: np.ndarray, heights: np.ndarray
-) -> np.ndarray:
-    """(T, 2, 6) sole twists [linear, angular], LOCAL_WORLD_ALIGNED, columns as `FEET`.
-
-    configurations (T, nq); joint_velocities (T, 26), the study's joint order; heights (T, 2):
-    each sole's lowest corner (pimann.core.contacts.FootKinematics.heights), the lower one is the
-    support foot (the left on a tie). One pinocchio Jacobian pass per frame.
-    """
+def sole_jacobians(robot: Robot, configurations: np.ndarray) -> np.ndarray:
+    """(T, 2, 6, nv) LOCAL_WORLD_ALIGNED sole Jacobians, columns as `FEET`; one pinocchio
+    Jacobian pass per frame, shared by both velocity levels."""
     model = robot.model
     data = model.createData()  # private: the cached Robot's data may be in use elsewhere
     frame_ids = [robot.frame_id(name) for name in FEET]
-    base = robot.velocity_order[:6]  # the free flyer's columns
-    support = np.argmin(np.asarray(heights), axis=1)
-    n = len(configurations)
-    jacobians = np.empty((n, 2, 6, model.nv))
+    jacobians = np.empty((len(configurations), 2, 6, model.nv))
     for k, q in enumerate(configurations):
         pin.computeJointJacobians(model, data, q)
         pin.updateFramePlacements(model, data)
         for f, frame_id in enumerate(frame_ids):
             jacobians[k, f] = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
+    return jacobians
+
+
+def support_foot_velocities(
+    robot: Robot, jacobians: np.ndarray, joint_velocities: np.ndarray, heights: np.ndarray
+) -> np.ndarray:
+    """(T, 2, 6) sole twists [linear, angular], LOCAL_WORLD_ALIGNED, columns as `FEET`.
+
+    jacobians (T, 2, 6, nv) from `sole_jacobians`; joint_velocities (T, 26), the study's joint
+    order; heights (T, 2): each sole's lowest corner (pimann.core.contacts.FootKinematics
+    .heights), the lower one is the support foot (the left on a tie).
+    """
+    base = robot.velocity_order[:6]  # the free flyer's columns
+    support = np.argmin(np.asarray(heights), axis=1)
+    n = len(jacobians)
     joint_part = np.einsum("tfij,tj->tfi", jacobians[..., robot.v_index], joint_velocities)
     held = jacobians[np.arange(n), support][..., base]  # (T, 6, 6) the support sole's base block
     base_twist = -np.linalg.solve(held, joint_part[np.arange(n), support][..., None])[..., 0]
     return np.einsum("tfij,tj->tfi", jacobians[..., base], base_twist) + joint_part
 
 
-def sole_jacobians(robot: Robot, configurations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(T, 2, 6, nv) LOCAL_WORLD_ALIGNED sole Jacobians and (T, 2, 3, 3) sole rotations, columns
-    as `FEET`; one pinocchio Jacobian pass per frame."""
-    model = robot.model
-    data = model.createData()  # private: the cached Robot's data may be in use elsewhere
-    frame_ids = [robot.frame_id(name) for name in FEET]
-    n = len(configurations)
-    jacobians = np.empty((n, 2, 6, model.nv))
-    rotations = np.empty((n, 2, 3, 3))
-    for k, q in enumerate(configurations):
-        pin.computeJointJacobians(model, data, q)
-        pin.updateFramePlacements(model, data)
-        for f, frame_id in enumerate(frame_ids):
-            jacobians[k, f] = pin.getFrameJacobian(model, data, frame_id, pin.LOCAL_WORLD_ALIGNED)
-            rotations[k, f] = data.oMf[frame_id].rotation
-    return jacobians, rotations
-
-
 def authors_sole_velocities(
     robot: Robot,
     configurations: np.ndarray,
+    jacobians: np.ndarray,
     joint_velocities: np.ndarray,
-    sole_positions: np.ndarray,
+    feet: FootKinematics,
 ) -> np.ndarray:
     """(T, 2, 6) sole twists [linear, angular] LOCAL_WORLD_ALIGNED at q_i, as the authors' step
     from q_{i-1} to q_i makes them (module docstring); frame 0, which has no previous state, NaN.
 
-    configurations (T, nq); joint_velocities (T, 26) the study's order, row i the step's sdot_i;
-    sole_positions (T, 2, 3) the sole origins (the support pick's corners hang from them).
+    configurations (T, nq); jacobians (T, 2, 6, nv) from `sole_jacobians`; joint_velocities
+    (T, 26) the study's order, row i the step's sdot_i; feet: the soles' placements (the
+    support pick's corners hang from them).
     """
-    jacobians, rotations = sole_jacobians(robot, configurations)
     base, joints = robot.velocity_order[:6], robot.v_index
-    heights = sole_positions[..., 2] + corner_offsets(rotations, AUTHORS_SOLE_CORNERS)[..., 2].min(
-        axis=-1
-    )
+    heights = lowest_corner_heights(feet.positions, feet.rotations, AUTHORS_SOLE_CORNERS)
     n = len(configurations)
     previous, current = np.arange(n - 1), np.arange(1, n)
     support = (heights[:-1, 1] < heights[:-1, 0]).astype(int)  # the left on a tie
