@@ -30,8 +30,8 @@ from pimann.core.params import EvaluateParams
 from pimann.evaluate.data_reference import reference_value
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
 from pimann.generate.rollout_layout import (
-    ADHERENT,
     BASELINE,
+    paper_baseline,
     pi_models,
     select_rows,
     weight_label,
@@ -110,8 +110,7 @@ class SeedData:
         self.scenario = scenario
         self.models = pi_models(frame)
         self.representation = representation
-        # the paper's baseline: ADHERENT where it was trained, else the yaw-only variant
-        self.baseline = ADHERENT if (self.frame["model"] == ADHERENT).any() else BASELINE
+        self.baseline = paper_baseline(self.frame)
 
     def values(self, model: str | None, steering: bool, metric: str) -> np.ndarray:
         if model is None or metric not in self.frame:
@@ -143,28 +142,22 @@ def velocity_level_cause(data: SeedData, weights: Sequence[float]) -> str:
     `weights` on the position level (the poses alone) and their double-support share (the
     velocity level holds the lower foot: only the other one slides, while both are down),
     seed medians of the unsteered runs."""
+    return "; double support: " + unsteered_medians(data, weights, "double_support_fraction")
+
+
+def unsteered_medians(data: SeedData, weights: Sequence[float], metric: str) -> str:
+    """'<baseline> m, w=<w> m, ...': a metric's seed medians of the unsteered runs of the
+    baseline and the PI `weights`."""
     models = [(data.baseline, data.baseline)]
     models += [(f"w={weight_label(w)}", data.model(w)) for w in weights]
-
-    def medians(metric: str) -> str:
-        return ", ".join(
-            f"{label} {fmt(data.median(model, False, metric))}" for label, model in models
-        )
-
-    return "; double support: " + medians("double_support_fraction")
+    return ", ".join(f"{label} {fmt(data.median(model, False, metric))}" for label, model in models)
 
 
 def stricter_beside(data: SeedData, weights: Sequence[float]) -> str:
     """Our stricter measures (`STRICTER`) beside the authors', seed medians of the unsteered
     runs of the baseline and the PI `weights`."""
-    models = [(data.baseline, data.baseline)]
-    models += [(f"w={weight_label(w)}", data.model(w)) for w in weights]
     return "; ours: " + "; ".join(
-        f"{label}: "
-        + ", ".join(
-            f"{name} {fmt(data.median(model, False, f'support_rmse_{metric}_total'))}"
-            for name, model in models
-        )
+        f"{label}: {unsteered_medians(data, weights, f'support_rmse_{metric}_total')}"
         for metric, label in STRICTER.items()
     )
 

@@ -43,6 +43,7 @@ from pimann.generate.rollout_layout import (
     RolloutKey,
     find_rollouts,
     is_clip,
+    paper_baseline,
     pi_models,
     rollout_columns,
     rollout_path,
@@ -177,7 +178,7 @@ def timeseries_selection(frame: pd.DataFrame, evaluate: EvaluateParams) -> dict[
     scenario = evaluate.scenario
     models = pi_models(frame)
     chosen: dict[str, RolloutKey] = {}
-    baseline = ADHERENT if (frame["model"] == ADHERENT).any() else BASELINE  # the paper's
+    baseline = paper_baseline(frame)
     seed = representative_seed(frame, baseline, scenario, False)
     if seed is not None:
         chosen["base_baseline"] = RolloutKey(baseline, seed, scenario, False)

@@ -192,6 +192,12 @@ def select_rows(frame: pd.DataFrame, scenario: str, steering: bool, **where: Any
     return frame[mask]
 
 
+def paper_baseline(frame: pd.DataFrame) -> str:
+    """The model that stands for the paper's baseline in a table keyed like the layout:
+    ADHERENT where it was rolled out, else the yaw-only variant."""
+    return ADHERENT if (frame["model"] == ADHERENT).any() else BASELINE
+
+
 def pi_models(frame: pd.DataFrame) -> dict[float, str]:
     """{pi_weight: model name} of the PI models (every model but the two baselines)."""
     rows = frame[~frame["model"].isin([BASELINE, ADHERENT])].drop_duplicates("model")

@@ -35,7 +35,7 @@ from pimann.evaluate.figure_style import (
 )
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE
 from pimann.evaluate.results import Results, load_results
-from pimann.generate.rollout_layout import ADHERENT, BASELINE, pi_models, weight_label
+from pimann.generate.rollout_layout import paper_baseline, pi_models, weight_label
 
 log = logging.getLogger(__name__)
 CONDITIONS = {  # drift figures: (title, colour, line style)
@@ -99,7 +99,7 @@ def fig_pi_weight_comparison(
         )  # fmt: skip
         for patch, w in zip(boxes["boxes"], weights, strict=True):
             patch.set_facecolor((*colours[float(w)][:3], 0.35))
-        name = ADHERENT if (frame["model"] == ADHERENT).any() else BASELINE
+        name = paper_baseline(frame)
         baseline = frame.loc[frame["model"] == name, metric].dropna()
         if len(baseline):
             ax.axhline(baseline.median(), color=BASELINE_COLOUR, ls="--", lw=1.0, label=name)

@@ -45,6 +45,7 @@ from pimann.generate.rollout_layout import (
     BASELINE,
     HELD_OUT,
     STEERING_LABEL,
+    paper_baseline,
     pi_models,
     select_rows,
     weight_label,
@@ -101,7 +102,7 @@ def claim_metrics(statuses: dict[str, str]) -> dict[str, Number]:
 def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
     """Medians per model of the headline metrics on evaluate.scenario, and the drifts."""
     scenario = params.evaluate.scenario
-    adherent = [ADHERENT] if len(frame) and (frame["model"] == ADHERENT).any() else []
+    adherent = [ADHERENT] if len(frame) and paper_baseline(frame) == ADHERENT else []
     models = [*adherent, BASELINE, *pi_models(frame).values()] if len(frame) else []
     out: dict[str, Number] = {}
     for model in models:
