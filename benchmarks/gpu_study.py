@@ -9,6 +9,10 @@
 3. The largest real training (pimann.learn.train.train_models, 5 seeds, w = 10) that fits
    `--budget-s`: every training sample of `--dataset` and as many epochs as the measured
    step time allows (at most train.epochs), with its wall time against the projection.
+4. The sweep as the stages train it on a GPU (pimann.learn.sweep: every weight of
+   train.pi_weights x 5 seeds in one ensemble), eager and, on CUDA, replayed as a CUDA graph,
+   side by side in this run: wall seconds an epoch on `--dataset` and the paper-size sweep
+   (150 epochs over 254k samples) projected from them.
 
     python -m benchmarks.gpu_study [--device cuda] [--budget-s 300] [--dataset PATH] [--smoke]
 
@@ -40,6 +44,7 @@ from pimann.learn.dataset import read_dataset, write_dataset
 from pimann.learn.feature_layout import Normalisation, window_layout
 from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
+from pimann.learn.sweep import train_sweep
 from pimann.learn.train import autocast, pick_device, train_models
 from pimann.learn.training_loss import TrainingLoss
 
@@ -149,6 +154,44 @@ def largest_training(
     print(f"  trained in {wall:.1f} s ({wall / epochs:.2f} s an epoch); best test loss {best}")
 
 
+def sweep_epochs(
+    params: Params, dataset: Path, step_s: float, budget_s: float, device: torch.device,
+    precision: str,
+) -> None:  # fmt: skip
+    """The stages' sweep, eager and (on CUDA) graphed, each for the epochs that fit half of
+    `budget_s`; wall seconds an epoch and the paper-size sweep projected from them."""
+    samples = len(read_dataset(dataset).x_train)
+    weights = list(params.train.pi_weights)
+    members = len(weights) * len(SEEDS)
+    steps = math.ceil(samples / params.train.batch_size)
+    estimate = steps * step_s * members / len(SEEDS)  # eager: the 5-seed step, scaled
+    epochs = max(1, min(params.train.epochs, int(0.35 * budget_s / estimate)))
+    train = dataclasses.replace(
+        params.train, epochs=epochs, max_train_samples=None, precision=precision,
+        device=device.type, seeds=SEEDS,
+    )  # fmt: skip
+    run = dataclasses.replace(params, train=train)
+    modes = [False] + ([True] if device.type == "cuda" else [])
+    print(f"the sweep as the stages train it: {members} models (w {weights} x seeds {SEEDS}), "
+          f"{samples} samples, {epochs} epochs, {precision}")  # fmt: skip
+    per_epoch = {}
+    for graph in modes:
+        start = time.perf_counter()
+        train_sweep(dataset, weights, SEEDS, run, device, graph=graph, progress=None)
+        per_epoch[graph] = (time.perf_counter() - start) / epochs
+    paper = EPOCHS * SAMPLES / samples
+    cells = [
+        f"{'graphed' if graph else 'eager'} {t:.2f} s an epoch "
+        f"({t / steps * 1e3:.2f} ms a step), paper size {paper * t / 60:.1f} min"
+        for graph, t in per_epoch.items()
+    ]
+    print("  " + " | ".join(cells))
+    if len(per_epoch) == 2:
+        print(f"  graphed / eager: {per_epoch[True] / per_epoch[False]:.2f}")
+    else:
+        print("  graphed: needs CUDA")
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--device", default="auto")
@@ -197,6 +240,7 @@ def main(argv: list[str] | None = None) -> int:
             dataset = synthetic_dataset(out / "full.h5", params, 3 if args.smoke else 6)
             print(f"  (synthetic dataset: no features given, {default} absent or --smoke)")
         largest_training(params, dataset, times[fastest][0], budget, device, fastest, out)
+        sweep_epochs(params, dataset, times[fastest][0], budget, device, fastest)
     return 0
 
 

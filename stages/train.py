@@ -4,7 +4,9 @@
         --plots results/training/w10 [-v]
 
 trains the seeds `train.seeds` of one weight as one vectorised ensemble and writes
-<out>/<seed>/{model.pt,meta.json} and <plots>/seed<seed>.csv. An interrupted run resumes from
+<out>/<seed>/{model.pt,meta.json} and <plots>/seed<seed>.csv. On a CUDA device the first
+weight's stage trains every weight of `train.pi_weights` at once (pimann.learn.sweep) and
+each stage writes its own weight's models out of that sweep. An interrupted run resumes from
 its per-epoch checkpoint in <out's parent>/.checkpoints/<out's name>/. The log names the run
 after <out> (w10, baseline): its progress over the epochs, and with -v every epoch's losses.
 """
@@ -22,6 +24,7 @@ from pimann.core.params import load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.stage import stage_entry
 from pimann.learn.feature_layout import VARIANTS
+from pimann.learn.sweep import train_from_sweep, uses_sweep
 from pimann.learn.train import pick_device, train_models
 
 log = logging.getLogger("train")
@@ -44,10 +47,18 @@ def main(argv: list[str] | None = None) -> None:
         device, dataset,
     )  # fmt: skip
     started = time.perf_counter()
-    metas = train_models(
-        dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
-        device, plots_dir=REPO_ROOT / args.plots,
-    )  # fmt: skip
+    if uses_sweep(device):
+        in_sweep = args.variant == "full" and args.pi_weight in params.train.pi_weights
+        sweep = params.train.pi_weights if in_sweep else [args.pi_weight]
+        metas = train_from_sweep(
+            dataset, REPO_ROOT / args.out, args.pi_weight, sweep, params, device,
+            plots_dir=REPO_ROOT / args.plots,
+        )  # fmt: skip
+    else:
+        metas = train_models(
+            dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
+            device, plots_dir=REPO_ROOT / args.plots,
+        )  # fmt: skip
     best = ", ".join(
         f"{seed}: {meta['best_epoch']} ({meta['best_test_loss']:.5f})"
         for seed, meta in metas.items()

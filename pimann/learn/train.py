@@ -20,8 +20,8 @@ epoch with the lowest test loss is kept, per member.
 the optimiser state, L_D, L_B's kinematics and the test loss stay float32, and the dropout
 masks are drawn in float32, so both precisions draw the same masks from the same seeds.
 
-Over 400 lines: one training loop (ensembles, workers, checkpoints, precision) that reads as
-a unit; its loss, epochs and model files are already their own modules.
+On a CUDA device the stages train the whole sweep of PI weights as one ensemble instead
+(pimann.learn.sweep); this module stays the CPU's trainer.
 """
 
 from __future__ import annotations
@@ -46,7 +46,7 @@ from pimann.core.parallel import cpu_workers, pool_map, training_threads
 from pimann.core.params import Params, as_dict
 from pimann.core.progress import Progress
 from pimann.core.stage_times import note
-from pimann.learn.dataset import read_dataset
+from pimann.learn.dataset import FeatureDataset, read_dataset
 from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
 from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
 from pimann.learn.mann import MANN
@@ -113,7 +113,9 @@ class _State:
     history: list[list[dict]]  # per member, one row per epoch
 
 
-def _fingerprint(dataset_path: Path, pi_weight: float, seeds: list[int], params: Params) -> str:
+def _fingerprint(
+    dataset_path: Path, pi_weight: float | list[float], seeds: list[int], params: Params
+) -> str:
     """What a checkpoint must match to be resumed (the epoch count may grow)."""
     train = {
         **as_dict(params.train),
@@ -214,15 +216,40 @@ def _train(
     if any(result is None for result in results):
         return {}  # stopped early (stop_after)
     members = {seed: member for result in results for seed, member in result.items()}
+    metas = write_models(out_dir, plots_dir, dataset_path, data, pi_weight, members, params,
+                         precision, n)  # fmt: skip
+    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
+    return metas
 
+
+def training_subset(n: int, max_samples: int | None) -> np.ndarray:
+    """The training rows used: all, or `max_samples` evenly spaced ones (max_train_samples)."""
+    if max_samples is None or n <= max_samples:
+        return np.arange(n)
+    return np.linspace(0, n - 1, max_samples).round().astype(np.int64)
+
+
+def write_models(
+    out_dir: Path,
+    plots_dir: str | Path | None,
+    dataset_path: Path,
+    data: FeatureDataset,
+    pi_weight: float,
+    members: dict[int, dict],
+    params: Params,
+    precision: str,
+    train_samples: int,
+) -> dict[int, dict]:
+    """out_dir/<seed>/ (model and meta) and plots_dir/seed<seed>.csv for each trained member
+    (its best `state_dict`, `best_epoch`, `best_loss` and `history`); the metas by seed."""
+    config = params.train
     metas = {}
     with atomic_path(out_dir) as tmp:
-        for seed in seeds:
-            member = members[seed]
+        for seed, member in members.items():
             meta = {
                 "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
                 "best_epoch": member["best_epoch"], "best_test_loss": member["best_loss"],
-                "epochs": config.epochs, "precision": precision, "train_samples": n,
+                "epochs": config.epochs, "precision": precision, "train_samples": train_samples,
                 "test_samples": len(data.x_test),
                 "dataset": str(dataset_path), "train_clips": data.train_clips,
                 "test_clips": data.test_clips, "standing": data.standing,
@@ -235,9 +262,8 @@ def _train(
     if plots_dir is not None:
         with atomic_path(plots_dir) as tmp:
             tmp.mkdir()
-            for seed in seeds:
-                write_loss_csv(tmp / f"seed{seed}.csv", members[seed]["history"])
-    shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
+            for seed, member in members.items():
+                write_loss_csv(tmp / f"seed{seed}.csv", member["history"])
     return metas
 
 
@@ -280,10 +306,7 @@ def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
     checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
 
     data = read_dataset(job.dataset_path)
-    keep = np.arange(len(data.x_train))
-    if config.max_train_samples is not None and len(data.x_train) > config.max_train_samples:
-        keep = np.linspace(0, len(data.x_train) - 1, config.max_train_samples).round()
-        keep = keep.astype(np.int64)
+    keep = training_subset(len(data.x_train), config.max_train_samples)
     states, test_rollouts = training_states(
         config, job.params.rollout.command_blend_tau, data, keep, job.seeds, device
     )  # rolled out from every training sample
