@@ -4,8 +4,9 @@ casadi Opti, multiple shooting, forward Euler, mass normalised to 1. State: CoM 
 velocity, angular momentum L (per unit mass); per foot its position and a velocity used only
 in the air; per foot corner a force. Footsteps more than `freeze_s` before their touchdown
 may move inside a landing box around the nominal one, so a push is answered by stepping.
-The problem is built once and compiled with `opti.to_function`; every solve is warm started
-from the previous one.
+The problem is stated stage by stage and built once per solver (`simulate.mpc.solver`):
+ipopt or fatrop solve it to convergence, rti-<qp> by one convex QP a horizon
+(`SequentialQp`); every solve is warm started from the previous one, one knot on.
 
 Contacts come from the footstep plan resampled on the MPC's knots: a foot carries forces on
 an interval only when both its knots lie in the same contact phase (`a_i`), and then it does
