@@ -28,9 +28,13 @@ FEET = np.array([[0.0, 0.1, 0.0], [0.0, -0.1, 0.0]])
 COM = np.array([0.0, 0.0, 0.7])
 
 
-@pytest.fixture(scope="module")
-def mpc() -> CentroidalMPC:
-    return CentroidalMPC(MpcParams())
+SOLVERS = ["ipopt", "fatrop", "rti-piqp", "rti-osqp"]
+
+
+@pytest.fixture(scope="module", params=SOLVERS)
+def mpc(request) -> CentroidalMPC:
+    """The MPC with each solver: every test below holds for each."""
+    return CentroidalMPC(MpcParams(), request.param)
 
 
 def _problem(plan, t: float, params: MpcParams, velocity=(0.0, 0.0, 0.0), com=COM) -> MpcProblem:
@@ -153,7 +157,9 @@ def test_an_unsolvable_horizon_is_an_error():
     params = dataclasses.replace(MpcParams(), com_z_min=5.0, com_z_max=5.1)
     problem = _problem(stepping_plan(FEET, 0, 0.0), 0.0, params)
     with pytest.raises(PimannError, match="centroidal MPC not solved \\(ipopt: Infeasible"):
-        CentroidalMPC(params).solve(problem)
+        CentroidalMPC(params, "ipopt").solve(problem)
+    with pytest.raises(PimannError, match="not solved \\(piqp QP: primal infeasible"):
+        CentroidalMPC(params, "rti-piqp").solve(problem)
 
 
 def test_online_walk_in_mujoco(sim_robot, sim_params):
@@ -309,3 +315,121 @@ def test_cli_simulates_with_the_online_controller(tmp_path, capsys, sim_robot, s
     summary = json.loads(capsys.readouterr().out)
     assert summary["controller"] == "online" and not summary["fallen"]
     assert summary["mpc_solve_median_s"] > 0 and summary["simulated_s"] == pytest.approx(0.6)
+
+
+def _horizons(params: MpcParams) -> list[MpcProblem]:
+    """The horizons of the tests above: standing, stepping from a moving CoM, pushed both ways,
+    a frozen footstep."""
+    standing = _problem(stepping_plan(FEET, 0, 0.0), 0.0, params)
+    plan = stepping_plan(FEET, 2, 0.2)
+    problems = [standing, _problem(plan, 0.3, params, velocity=(0.2, 0.05, 0.0)),
+                _problem(plan, 0.3, params, velocity=(0.5, 0.0, 0.0))]  # fmt: skip
+    for t, push in ((0.3, 1.5), (0.3, -1.5), (1.1, -1.5)):
+        problem = _problem(plan, t, params)
+        problem.external_force = np.array([0.0, push, 0.0])
+        problems.append(problem)
+    return problems
+
+
+# how far a solver's solution may lie from ipopt's on the same horizon: CoM (m), CoM velocity
+# (m/s), feet (m), corner forces (per unit mass, m/s^2, of a 9.81 total)
+AGREE = {
+    "fatrop": {"com": 1e-5, "com_velocity": 1e-5, "footsteps": 1e-5, "forces": 1e-4},
+    "rti-piqp": {"com": 1e-4, "com_velocity": 1e-3, "footsteps": 1e-4, "forces": 1e-3},
+    "rti-osqp": {"com": 1e-4, "com_velocity": 1e-4, "footsteps": 1e-4, "forces": 1e-4},
+}
+
+
+def _gaps(problem: MpcProblem, a: MpcSolution, b: MpcSolution) -> dict[str, float]:
+    """How far two solutions of one horizon lie apart. Footsteps: the soles where they stand or
+    land (an airborne sole's path is nearly free: only a 1e-3 weight on its velocity)."""
+    ground = np.concatenate([problem.contact, problem.contact[:, -1:]], 1) > 0
+    ground |= problem.landing > 0
+    return {
+        "com": np.abs(a.com - b.com).max(),
+        "com_velocity": np.abs(a.com_velocity - b.com_velocity).max(),
+        "footsteps": np.abs(a.feet - b.feet)[ground].max(),
+        "forces": np.abs(a.forces - b.forces).max(),
+    }
+
+
+@pytest.mark.parametrize("solver", list(AGREE))
+def test_each_solver_solves_the_tests_horizons_as_ipopt(solver):
+    """Cold, each rti solver iterates its QPs until the step vanishes: ipopt's solution."""
+    params = MpcParams()
+    reference, other = CentroidalMPC(params, "ipopt"), CentroidalMPC(params, solver)
+    for problem in _horizons(params):
+        gaps = _gaps(problem, _solve(reference, problem), _solve(other, problem))
+        for field, tolerance in AGREE[solver].items():
+            assert gaps[field] <= tolerance, (field, gaps[field])
+
+
+def _holds_cones_and_boxes(problem: MpcProblem, solution: MpcSolution, params: MpcParams):
+    bound = params.friction / np.sqrt(2.0)
+    for side in (0, 1):
+        for knot in range(knot_count(params)):
+            local = rot_z(problem.yaw[side, knot]).T @ solution.forces[side, :, knot].T
+            assert (local[2] >= -1e-6).all()
+            assert (np.abs(local[:2]) <= bound * local[2] + 1e-6).all()
+    assert (solution.feet >= problem.lower - 1e-6).all()
+    assert (solution.feet <= problem.upper + 1e-6).all()
+
+
+# on a closed loop's horizons, each solved warm from the last as the loop does: the forces
+# of the first interval (what the loop applies, m/s^2 of 9.81), the CoM along the horizon
+# (m), the landings the MPC moved (m), the first interval's ZMP (m). A real-time iteration
+# is one QP a horizon: its CoM far down the horizon trails the converged one by about 1 mm.
+LOOP_AGREE = {
+    "fatrop": {"first_forces": 1e-4, "com": 1e-4, "landing": 1e-5, "zmp": 1e-5},
+    "rti-piqp": {"first_forces": 1e-3, "com": 3e-3, "landing": 1e-3, "zmp": 2e-4},
+    "rti-osqp": {"first_forces": 1e-2, "com": 3e-3, "landing": 1e-3, "zmp": 2e-4},
+}
+
+
+@pytest.fixture(scope="module")
+def loop_horizons(sim_robot, sim_params) -> list[MpcProblem]:
+    """Every horizon of a 2-step MuJoCo walk under the online controller (params' solver)."""
+    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.synthetic import standing_feet, stepping_trajectory
+    from pimann.sim.wbc import standing_pose
+
+    fast = dataclasses.replace(
+        sim_params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3
+    )
+    feet = standing_feet(sim_robot, standing_pose(sim_robot, sim_params))
+    plan = stepping_plan(feet, steps=2, step=0.1, start=0.2, end=0.2)
+    result = simulate_trajectory(stepping_trajectory(sim_robot, fast, plan), fast, None, "online")
+    assert not result.fallen and len(result.mpc_horizons) == len(result.mpc_solve_s) > 30
+    return result.mpc_horizons
+
+
+@pytest.fixture(scope="module")
+def loop_reference(loop_horizons, sim_params) -> list[MpcSolution]:
+    """ipopt's solutions of the closed loop's horizons, each warm from the last."""
+    reference = CentroidalMPC(sim_params.mpc, "ipopt")
+    return [reference.solve(problem) for problem in loop_horizons]
+
+
+@pytest.mark.parametrize("solver", list(LOOP_AGREE))
+def test_each_solver_follows_ipopt_along_a_closed_loops_horizons(
+    solver, loop_horizons, loop_reference, sim_params
+):
+    params = sim_params.mpc
+    other = CentroidalMPC(params, solver)
+    worst = dict.fromkeys(LOOP_AGREE[solver], 0.0)
+    moved = 0
+    for problem, a in zip(loop_horizons, loop_reference, strict=True):
+        b = other.solve(problem)
+        _holds_cones_and_boxes(problem, b, params)
+        landing = problem.landing > 0
+        moved += int(landing.any())
+        gaps = {
+            "first_forces": np.abs(a.forces[:, :, 0] - b.forces[:, :, 0]).max(),
+            "com": np.abs(a.com - b.com).max(),
+            "landing": np.abs(a.feet - b.feet)[landing].max() if landing.any() else 0.0,
+            "zmp": np.abs(a.zmp(problem, params) - b.zmp(problem, params)).max(),
+        }
+        worst = {k: max(worst[k], gaps[k]) for k in worst}
+    assert moved > 5  # the comparison saw landings the MPC may move
+    for field, tolerance in LOOP_AGREE[solver].items():
+        assert worst[field] <= tolerance, (field, worst[field])

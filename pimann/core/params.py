@@ -403,6 +403,11 @@ class MpcParams:
     )
     swing_velocity_weight: NonNegative = 1.0e-3  # makes the airborne feet's velocities unique
     max_iterations: Count = 200  # ipopt iterations per solve
+    # how each horizon is solved: ipopt (the reference) or fatrop, the NLP to convergence |
+    # rti-<qp>: one convex QP a horizon, the torques linearised at the last horizon's solution
+    # one knot on (pimann.sim.centroidal_mpc.SequentialQp), by piqp or osqp
+    solver: Literal["ipopt", "fatrop", "rti-piqp", "rti-osqp"] = "rti-piqp"
+    sqp_iterations: Count = 1  # rti-*: QPs per warm-started horizon (1: a real-time iteration)
 
     @model_validator(mode="after")
     def _consistent(self) -> MpcParams:

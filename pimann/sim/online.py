@@ -64,6 +64,7 @@ class OnlineReference:
         self.problem: MpcProblem | None = None
         self.solution: MpcSolution | None = None
         self.solve_times: list[float] = []
+        self.horizons: list[MpcProblem] = []  # in order: a replay with another solver
 
     def due(self, t: float) -> bool:
         return self.solved_at is None or t >= self.solved_at + self.mpc_params.dt - 1e-9
@@ -83,6 +84,7 @@ class OnlineReference:
         solution = self.mpc.solve(problem)
         self.problem, self.solution, self.solved_at = problem, solution, t
         self.solve_times.append(solution.solve_s)
+        self.horizons.append(problem)
         self._adjust_footsteps(t, problem, solution)
 
     def _adjust_footsteps(self, t: float, problem: MpcProblem, solution: MpcSolution) -> None:

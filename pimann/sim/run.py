@@ -70,6 +70,7 @@ class SimulationResult:
     foot_slip_per_foot: np.ndarray  # (2,) m, foot_slip of the left / right foot
     controller: str = "offline"  # offline (DCM plan) or online (centroidal MPC)
     mpc_solve_s: np.ndarray = dataclasses.field(default_factory=lambda: np.zeros(0))  # per solve
+    mpc_horizons: list = dataclasses.field(default_factory=list)  # each MpcProblem solved
 
     @property
     def soles_final(self) -> np.ndarray:
@@ -264,6 +265,7 @@ def simulate_plan(
         foot_slip_per_foot=slip,
         controller="offline" if online is None else "online",
         mpc_solve_s=np.zeros(0) if online is None else np.array(online.solve_times),
+        mpc_horizons=[] if online is None else online.horizons,
     )
 
 
