@@ -42,7 +42,7 @@ def _rows(frame, model, steering=False):
 
 
 def test_claims_hold_on_agreeing_numbers(params):
-    claims = evaluate_claims(crafted_metrics(), params.evaluate)
+    claims = evaluate_claims(crafted_metrics(), params.evaluate, "both")
     assert [c.id for c in claims] == ALL
     assert all(status == HOLDS for status in statuses(claims).values()), statuses(claims)
 
@@ -57,7 +57,7 @@ def test_claims_fail_on_contradicting_numbers(params):
     frame.loc[frame["model"] == "w100", "walks"] = True  # w=100 walks unsteered too
     # steering leaves the yaw drift of w=10 as large as without
     frame.loc[_rows(frame, "w10", True), "drift_yaw_max_abs"] = 0.6
-    claims = statuses(evaluate_claims(frame, params.evaluate))
+    claims = statuses(evaluate_claims(frame, params.evaluate, "both"))
     assert claims["C2"] == HOLDS  # linear still below the baseline for every w
     assert claims["C3"] == FAILS
     assert claims["C5"] == FAILS
@@ -70,7 +70,7 @@ def test_claims_fail_on_contradicting_numbers(params):
 
 def test_claims_without_baseline_are_not_comparable(params):
     frame = crafted_metrics()
-    claims = statuses(evaluate_claims(frame[frame["model"] != BASELINE], params.evaluate))
+    claims = statuses(evaluate_claims(frame[frame["model"] != BASELINE], params.evaluate, "both"))
     for claim in ("C1", "C2", "C3", "C4", "C12", "C13"):
         assert claims[claim] == NOT_COMPARABLE, claim
     assert claims["C5"] == HOLDS
@@ -78,24 +78,24 @@ def test_claims_without_baseline_are_not_comparable(params):
 
 def test_c1_compares_the_authors_metric_with_the_paper(params):
     frame = crafted_metrics()
-    c1 = evaluate_claims(frame, params.evaluate)[0]
+    c1 = evaluate_claims(frame, params.evaluate, "both")[0]
     assert c1.id == "C1" and c1.status == HOLDS
     assert c1.ours.startswith("baseline: ") and "the authors'" in c1.metric
     # ours at the paper's number does not help: the authors' metric is x2.2 the paper's
     frame["support_rmse_linear_total"] = 22.88
     frame["support_rmse_paper_linear_total"] = 2.2 * 22.88
-    c1 = evaluate_claims(frame, params.evaluate)[0]
+    c1 = evaluate_claims(frame, params.evaluate, "both")[0]
     assert c1.status == FAILS and "linear x2.20" in c1.reason and "do not walk" not in c1.reason
     frame.loc[frame["model"] == BASELINE, "walks"] = False  # a failing C1 says the seeds stand
-    c1 = evaluate_claims(frame, params.evaluate)[0]
+    c1 = evaluate_claims(frame, params.evaluate, "both")[0]
     assert "measured on baseline seeds 0, 1, 2, 3, 4 that do not walk" in c1.reason
     frame["walks"] = True
     # within a factor 2 both ways: half the paper's angular still holds, a third does not
     frame["support_rmse_paper_linear_total"] = 22.88
     frame["support_rmse_paper_angular_total"] = 17.74 / 1.9
-    assert evaluate_claims(frame, params.evaluate)[0].status == HOLDS
+    assert evaluate_claims(frame, params.evaluate, "both")[0].status == HOLDS
     frame["support_rmse_paper_angular_total"] = 17.74 / 3
-    assert evaluate_claims(frame, params.evaluate)[0].status == FAILS
+    assert evaluate_claims(frame, params.evaluate, "both")[0].status == FAILS
 
 
 def test_the_adherent_model_is_the_baseline_where_trained(params):
@@ -104,12 +104,12 @@ def test_the_adherent_model_is_the_baseline_where_trained(params):
     frame = crafted_metrics()
     adherent = frame[frame["model"] == BASELINE].assign(model="adherent")
     adherent["support_rmse_paper_linear_total"] = 4.0  # slides less than every PI model
-    claims = {c.id: c for c in evaluate_claims(pd.concat([frame, adherent]), params.evaluate)}
+    claims = {c.id: c for c in evaluate_claims(pd.concat([frame, adherent]), params.evaluate, "both")}
     assert (
         claims["C1"].ours.startswith("adherent: ") and "yaw-only variant: 20" in claims["C1"].ours
     )
     assert claims["C2"].status == FAILS and claims["C2"].ours.startswith("adherent ")
-    assert evaluate_claims(frame, params.evaluate)[1].status == HOLDS  # the variant: above
+    assert evaluate_claims(frame, params.evaluate, "both")[1].status == HOLDS  # the variant: above
 
 
 def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
@@ -119,19 +119,19 @@ def test_overlapping_seed_ranges_hold_only_within_the_spread(params):
     frame.loc[_rows(frame, "w20"), "support_rmse_paper_angular_total"] = [4, 4, 4, 4, 17.8]
     # w=10's contact feet: median slower than w=0's, one seed faster than w=0's slowest
     frame.loc[_rows(frame, "w10"), "contact_foot_speed_mean_position"] = [0.1, 0.1, 0.1, 0.1, 0.3]
-    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate, "both")}
     assert claims["C3"].status == WITHIN_SPREAD and "w=20" in claims["C3"].reason
     assert claims["C14"].status == WITHIN_SPREAD
     assert claims["C2"].status == HOLDS
     # medians in the wrong order do not hold at all
     frame.loc[_rows(frame, "w20"), "support_rmse_paper_angular_total"] = [4, 30, 30, 30, 30]
-    assert statuses(evaluate_claims(frame, params.evaluate))["C3"] == FAILS
+    assert statuses(evaluate_claims(frame, params.evaluate, "both"))["C3"] == FAILS
 
 
 def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False  # unsteered w=10 stands still
-    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate, "both")}
     for claim in ("C2", "C3", "C4", "C5", "C14"):
         assert claims[claim].status == STANDS_STILL, claim
         assert "w10 seeds 0, 1, 2, 3, 4 do not walk" in claims[claim].reason
@@ -140,7 +140,7 @@ def test_claims_that_hold_because_a_model_stands_still_say_so(params):
     assert claims["C10"].status == HOLDS and claims["C11"].status == HOLDS
     assert claims["C12"].status == HOLDS  # the favoured one is the baseline: it walks
     frame.loc[_rows(frame, BASELINE) & (frame["seed"] == 3), "walks"] = False
-    claims = statuses(evaluate_claims(frame, params.evaluate))
+    claims = statuses(evaluate_claims(frame, params.evaluate, "both"))
     assert claims["C1"] == STANDS_STILL and claims["C12"] == STANDS_STILL
 
 
@@ -153,7 +153,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
     position = (frame["model"] == "w10").map({True: 12.0, False: 30.0})
     frame["support_rmse_linear_position_total"] = position
     frame["double_support_fraction"] = (frame["model"] == "baseline").map({True: 0.6, False: 0.3})
-    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate)}
+    claims = {c.id: c for c in evaluate_claims(frame, params.evaluate, "both")}
     c4 = claims["C4"]
     assert c4.status == FAILS and "no reduction in linear" in c4.reason
     assert "linear -30%" in c4.ours
@@ -167,7 +167,7 @@ def test_c4_needs_a_reduction_in_both_parts(params):
 
 
 def test_every_claim_names_its_metric(params):
-    claims = {c.id: c for c in evaluate_claims(crafted_metrics(), params.evaluate)}
+    claims = {c.id: c for c in evaluate_claims(crafted_metrics(), params.evaluate, "both")}
     for claim in ("C1", "C2", "C3", "C4", "C5"):
         assert "the authors' sliding" in claims[claim].metric, claim
     assert "position-level" in claims["C14"].metric
@@ -177,7 +177,7 @@ def test_every_claim_names_its_metric(params):
 def test_claims_table_has_the_rules_the_data_row_and_escaped_cells(params):
     frame = crafted_metrics()
     frame.loc[_rows(frame, "w10"), "walks"] = False
-    claims = evaluate_claims(frame, params.evaluate)
+    claims = evaluate_claims(frame, params.evaluate, "both")
     text = claims_markdown(claims, {"profile": "quick"}, REFERENCE)
     for rule in RULES:
         assert rule in text
@@ -203,10 +203,10 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)  # below every other weight's
     frame = crafted_metrics(values)
-    (c9,) = [c for c in evaluate_claims(frame, params.evaluate) if c.id == "C9"]
+    (c9,) = [c for c in evaluate_claims(frame, params.evaluate, "both") if c.id == "C9"]
     assert c9.status == FAILS and "w=100 (0% of seeds walk)" in c9.reason
     frame.loc[frame["model"] == "w100", "walks"] = True
-    (c9,) = [c for c in evaluate_claims(frame, params.evaluate) if c.id == "C9"]
+    (c9,) = [c for c in evaluate_claims(frame, params.evaluate, "both") if c.id == "C9"]
     assert c9.status == FAILS and "walks at" not in c9.reason
     assert "holds the configuration" not in c9.reason  # the paper's pi_gradient: both
 
@@ -230,9 +230,9 @@ def test_c5_names_a_reduction_that_comes_without_the_physics_term(params):
     reduction is not the physics term's; with w=0 above the baseline it says nothing of it."""
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["support_rmse_paper_linear_total"].update(w0=6, w1=8, w10=10)  # grows with w
-    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate) if c.id == "C5"]
+    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"]
     assert c5[0].status == FAILS
     assert "w=0, trained without L_B, already slides below baseline (6 / 6" in c5[0].reason
     values["support_rmse_paper_linear_total"].update(w0=30)  # above the baseline's 20
-    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate) if c.id == "C5"]
+    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"]
     assert "without L_B" not in c5[0].reason

@@ -220,3 +220,44 @@ def test_a_protocol_sets_only_its_keys(raw, tmp_path):
     raw["rollout"]["protocols"]["forward"] = raw["rollout"]["protocols"]["authors"]
     with pytest.raises(PimannError, match="protocols.forward is also a scenario"):
         load_params(_write(tmp_path, raw))
+
+
+def _defaults_against(kind: type, values: dict, where: str) -> list[str]:
+    """Every field of `kind` with a code default, against the value params.yaml holds there."""
+    import dataclasses
+    import typing
+
+    differing = []
+    hints = typing.get_type_hints(kind)
+    for field in dataclasses.fields(kind):
+        value = values.get(field.name)
+        if field.default is not dataclasses.MISSING:
+            default = field.default
+        elif field.default_factory is not dataclasses.MISSING:
+            default = field.default_factory()
+        else:
+            default = dataclasses.MISSING
+        if default is not dataclasses.MISSING and field.name in values and value != default:
+            differing.append(f"{where}.{field.name}: code {default!r}, params.yaml {value!r}")
+        nested = typing.get_args(hints[field.name]) or (hints[field.name],)
+        for inner in nested:
+            if dataclasses.is_dataclass(inner) and isinstance(value, dict):
+                differing += _defaults_against(inner, value, f"{where}.{field.name}")
+    return differing
+
+
+def test_no_code_default_differs_from_params_yaml(raw):
+    """A section's code default that params.yaml overrides is a second, silent truth: code
+    that builds the section itself (tests, benchmarks, studies) would run other values."""
+    from pimann.core.params import Params
+
+    assert _defaults_against(Params, raw, "params") == []
+
+
+def test_the_defaults_check_sees_a_differing_default(raw):
+    raw["simulate"]["pushes"]["max_force"] = 123.0
+    from pimann.core.params import Params
+
+    assert _defaults_against(Params, raw, "params") == [
+        "params.simulate.pushes.max_force: code 800.0, params.yaml 123.0"
+    ]

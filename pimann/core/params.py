@@ -443,8 +443,8 @@ class PushParams:
     controllers: list[Literal["offline", "online"]]
     directions: list[Literal["lateral", "forward"]]
     duration_s: Positive = 0.1  # s, the push's length, centred on mid single support
-    max_force: Positive = 300.0  # N, the bisection's upper end
-    tolerance: Positive = 20.0  # N, the bisection stops when the bracket is this narrow
+    max_force: Positive = 800.0  # N, the bisection's upper end
+    tolerance: Positive = 25.0  # N, the bisection stops when the bracket is this narrow
     recovery_s: Positive = 1.5  # s after the push the base must stay up
 
 

@@ -299,7 +299,7 @@ def _header_provenance(provenance: dict[str, Any]) -> dict[str, Any]:
 
 
 def evaluate_claims(
-    frame: pd.DataFrame, evaluate: EvaluateParams, pi_gradient: str = "both"
+    frame: pd.DataFrame, evaluate: EvaluateParams, pi_gradient: str
 ) -> list[Claim]:
     """Each claim of the paper's Sec. IV against our metrics, by the `RULES`.
 
