@@ -36,10 +36,10 @@ from pimann.core.params import MotionSegment, StandSegment, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import STANDING_BASE_HEIGHT, STANDING_JOINTS, load_robot
 from pimann.core.trajectory import write_trajectory
-from pimann.generate.batch_generate import SECTIONS
+from pimann.generate.batch_generator import SECTIONS
 from pimann.generate.benchmark_clips import benchmark_scripts
 from pimann.generate.command_script import scenario_steps
-from pimann.generate.generator import RolloutSpec, generate_batch, generate_rollout
+from pimann.generate.rollout_batch import RolloutSpec, generate_batch, generate_rollout
 from pimann.learn.feature_layout import Normalisation, window_layout
 from pimann.learn.mann import MANN
 

@@ -86,7 +86,7 @@ def cmd_render(args: argparse.Namespace) -> None:
 
 
 def cmd_generate(args: argparse.Namespace) -> None:
-    from pimann.generate.generator import generate_file
+    from pimann.generate.rollout_batch import generate_file
 
     params = _params(args)
     generate_file(

@@ -36,7 +36,7 @@ from pimann.core.robot import (
 )
 from pimann.core.trajectory import Trajectory, write_collection, write_trajectory
 from pimann.evaluate.evaluation import provenance, write_results
-from pimann.generate.generator import (
+from pimann.generate.rollout_batch import (
     generate_rollout,
 )
 from pimann.generate.rollout_layout import (

@@ -341,7 +341,7 @@ def test_shared_reads_follow_the_robot_variants():
         f"robots/{MODEL_FILES['simulation']}",
         f"robots/{MESH_DIRS['simulation']}",
     }
-    assert set(shared_reads({ROOT / "pimann/generate/generator.py"}, params)) == {
+    assert set(shared_reads({ROOT / "pimann/generate/rollout_batch.py"}, params)) == {
         f"robots/{MODEL_FILES['retarget']}"
     }
     clips = set(shared_reads({ROOT / "pimann/mocap/clips.py"}, params))

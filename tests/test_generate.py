@@ -23,7 +23,7 @@ from pimann.core.params import ModelParams, MotionSegment, StandSegment, load_pa
 from pimann.core.robot import JOINT_NAMES, STANDING_JOINTS
 from pimann.core.rotations import matrix_to_rpy, yaw_of
 from pimann.core.trajectory import read_trajectory
-from pimann.generate.generator import (
+from pimann.generate.rollout_batch import (
     generate,
     generate_file,
     generate_rollout,
@@ -142,11 +142,10 @@ def test_steering_cuts_lateral_and_yaw_drift(robot, params):
     assert yaw_steered * 5 < yaw_free
 
 
-@pytest.mark.parametrize("held", ["progress", "carrot"])
-def test_goal_stop_returns_to_standing(robot, params, held):
+def test_goal_stop_returns_to_standing(robot, params):
     scenario = [MotionSegment(3.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
     model = GaitModel(robot, bias=(0.02, 0.05))
-    rollout = roll(model, scenario, params, True, robot, held_command=held)
+    rollout = roll(model, scenario, params, True, robot)
     trajectory = rollout.trajectory
     walking = int(np.flatnonzero(~rollout.stopped)[0])  # frame 0 is standing still
     stop = walking + int(np.flatnonzero(rollout.stopped[walking:])[0])
@@ -156,10 +155,8 @@ def test_goal_stop_returns_to_standing(robot, params, held):
     offset = trajectory.base_position[stop, :2] - rollout.goals[stop, :2]
     assert np.hypot(*offset) <= params.rollout.goal_radius or offset[0] >= 0
     assert stop == 151 or np.hypot(*offset) <= params.rollout.goal_radius
-    # the path runs along x from the start; `carrot` runs at the commanded 0.5 m/s for 3 s,
-    # `progress` as far as the base went
-    path_x = 1.5 if held == "carrot" else trajectory.base_position[stop - 1, 0]
-    np.testing.assert_allclose(rollout.goals[stop, :2], [path_x, 0.0], atol=0.02)
+    # the path runs along x from the start at the commanded 0.5 m/s for 3 s
+    np.testing.assert_allclose(rollout.goals[stop, :2], [1.5, 0.0], atol=0.02)
     blend = int(round(params.rollout.stop_blend_s * 50))
     np.testing.assert_array_equal(
         trajectory.joint_positions[stop + blend :],
@@ -176,7 +173,7 @@ def test_goal_stop_returns_to_standing(robot, params, held):
 def test_unreached_goal_stops_after_the_timeout(robot, params):
     scenario = [MotionSegment(1.0, 0.5, 0.0, 0.0), StandSegment(3.0, True)]
     stuck = GaitModel(robot, stride=0.0)  # steps in place: never reaches the goal
-    rollout = roll(stuck, scenario, params, True, robot, held_command="carrot")
+    rollout = roll(stuck, scenario, params, True, robot)
     stops = np.flatnonzero(np.diff(rollout.stopped.astype(int)) == 1) + 1
     timeout = int(round(params.rollout.stop_timeout_s * 50))
     assert list(stops) == [51 + timeout]  # 'stand' starts at frame 51
@@ -306,59 +303,3 @@ def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
     # the lowest sole corner on the floor from the first frame (independent FK)
     heights = foot_kinematics(robot, trajectory_configurations(robot, trajectory)).heights
     assert abs(heights[0].min()) < 1e-9
-
-
-def _support_rotations(robot, rollout):
-    """(T, 3, 3) the support foot's world orientation (independent FK) and (T,) frames where
-    that foot was the support at the frame before too (neither stopped)."""
-    trajectory = rollout.trajectory
-    feet = foot_kinematics(robot, trajectory_configurations(robot, trajectory))
-    frames = np.arange(len(trajectory))
-    rotations = feet.rotations[frames, rollout.support]
-    held = (rollout.support[1:] == rollout.support[:-1]) & ~rollout.stopped[1:]
-    held &= ~rollout.stopped[:-1]
-    return rotations, np.flatnonzero(held) + 1
-
-
-def test_odometry_orientation_keeps_the_support_foot_turned_as_it_was(robot, params):
-    """`rollout.base_orientation: odometry`: while a foot stays the support its world
-    orientation holds (the base turns as the legs turn it); integrated, the gait's base turns
-    at the commanded rate and the flat-footed legs turn the support foot with it."""
-    scenario = [MotionSegment(4.0, 0.3, 0.0, 0.25)]
-    turned = {}
-    for mode in ("integrated", "odometry"):
-        rollout = roll(GaitModel(robot), scenario, params, False, robot, base_orientation=mode)
-        rotations, held = _support_rotations(robot, rollout)
-        change = rotations[held] - rotations[held - 1]
-        turned[mode] = np.abs(change).max(axis=(1, 2))
-        assert len(held) > 150
-    assert np.median(turned["integrated"]) > 1e-3  # ~0.25 rad/s x 0.02 s
-    # the support foot of place() is the one orient() held but where the two pick differently
-    assert np.mean(turned["odometry"] < 1e-9) > 0.95
-
-
-class SlowRates(GaitModel):
-    """The gait model predicting half its joints' rates: joints and velocities disagree."""
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        y = super().forward(x).clone()
-        y[:, LAYOUT.y_slices["joint_velocities"]] *= 0.5
-        return y
-
-
-@pytest.mark.parametrize("blend", [0.0, 0.5, 1.0])
-def test_joint_position_blend_integrates_the_predicted_velocities(robot, params, blend):
-    """s_i = b s_hat_i + (1 - b)(s_{i-1} + dt sdot_hat_i): at b = 0 the written joints are the
-    written velocities' sum; with the predicted joints in, they are not."""
-    model = SlowRates(robot).double()
-    rollout = roll(model, FORWARD, params, False, robot, joint_position_blend=blend)
-    trajectory = rollout.trajectory
-    walking = np.flatnonzero(~rollout.stopped[1:] & ~rollout.stopped[:-1]) + 1
-    joints, rates = trajectory.joint_positions, trajectory.joint_velocities
-    integrated = joints[walking - 1] + rates[walking] / 50.0
-    gap = np.abs(joints[walking] - integrated).max()
-    if blend == 0.0:  # the predicted velocities integrated, exactly
-        assert gap < 1e-12
-    else:  # the predicted joints enter: they move twice as far as the rates say
-        assert gap > 1e-3
-    assert np.ptp(joints[walking], axis=0).max() > 0.05  # the legs do move

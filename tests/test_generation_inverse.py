@@ -15,7 +15,7 @@ from builders import CONTACT_PARAMS
 from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, load_params
-from pimann.generate.batch_generate import BatchGenerator, data_start
+from pimann.generate.batch_generator import BatchGenerator, data_start
 from pimann.generate.command_script import ScriptSteps
 from pimann.learn.feature_layout import Normalisation, window_layout
 from pimann.learn.features import clip_features
@@ -83,9 +83,7 @@ class Oracle:
         return np.stack([data_y[start + k] for _, data_y, start in self.rows])
 
 
-def oracle_rollout(
-    robot, clips, starts, variant, steps, joint_velocity_feedback="predicted", gait_phase=False
-):
+def oracle_rollout(robot, clips, starts, variant, steps, gait_phase=False):
     """Roll the oracle out from the data's state at `starts` for `steps` frames, steering and
     the command blend off: (oracle, joints (steps, B, nj), rotations, positions)."""
     layout = layout_of(variant, gait_phase)
@@ -98,9 +96,7 @@ def oracle_rollout(
         assert start in s and start + steps - 1 <= s[-1]
     n_in, n_out = layout.input_dim, layout.output_dim
     identity = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
-    rollout = dataclasses.replace(
-        PARAMS.rollout, command_blend_tau=None, joint_velocity_feedback=joint_velocity_feedback
-    )
+    rollout = dataclasses.replace(PARAMS.rollout, command_blend_tau=None)
     generator = BatchGenerator(
         torch.nn.Linear(n_in, n_out), layout, identity, rollout, np.zeros(len(clips), bool),
         robot, CONTACT_PARAMS, StandingPose.nominal(),
@@ -124,20 +120,6 @@ def clip_rotations(clip, variant):
         yaw = np.arctan2(rotations[:, 1, 0], rotations[:, 0, 0])
         rotations = Rotation.from_euler("z", yaw[:, None]).as_matrix()
     return rotations
-
-
-def test_differenced_joint_velocities_feed_the_oracle_the_data_inputs(robot, real_walks):
-    """The data satisfy s_i = s_{i-1} + dt sdot_i, so feeding back the predicted joints'
-    differences instead of the predicted sdot changes nothing for a network that predicts the
-    data; a generator that differenced across the wrong frames would fail here."""
-    clips = [real_walks[name] for name in ("walk", "walk_back")]
-    oracle, joints, _, _ = oracle_rollout(
-        robot, clips, [60, 55], "full", 100, joint_velocity_feedback="differenced"
-    )
-    assert oracle.calls == 100
-    assert oracle.worst < 1e-9
-    for row, (clip, start) in enumerate(zip(clips, [60, 55], strict=True)):
-        assert np.abs(joints[:, row] - clip.joint_positions[start : start + 100]).max() < 1e-12
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),

@@ -130,8 +130,8 @@ def test_scripts_round_trip_through_json():
 
 GENERATION = (
     "torch",
-    "pimann.generate.generator",
-    "pimann.generate.batch_generate",
+    "pimann.generate.rollout_batch",
+    "pimann.generate.batch_generator",
     "pimann.learn.train",
     "pimann.learn.model_files",
     "pimann.learn.mann",
@@ -175,7 +175,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
     """One batch per seed (scripts x steering): each file as `pimann generate` writes it."""
 
     from pimann.core.trajectory import read_trajectory
-    from pimann.generate.generator import generate_file
+    from pimann.generate.rollout_batch import generate_file
     from pimann.generate.rollouts import run_rollouts
 
     params = load_params()
@@ -222,7 +222,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
 def test_a_protocol_runs_with_the_rollout_keys_it_sets(tmp_path):
     """The protocol's unsteered way overwrites the future window with the command (tau 0) and
     starts from zero velocity windows: not the plain unsteered rollout of the same script."""
-    from pimann.generate.generator import generate_file
+    from pimann.generate.rollout_batch import generate_file
 
     params = load_params()
     params = dataclasses.replace(

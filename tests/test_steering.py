@@ -7,7 +7,7 @@ import pinocchio as pin
 import pytest
 
 from pimann.core.rotations import hat, rotation_rpy, skew_part, vee, yaw_of
-from pimann.generate.steering import goal_from_command, reached_goal, steer
+from pimann.generate.steering import CarrotGoal, goal_from_command, reached_goal, steer
 
 K0, K1 = 0.2, 2.0
 
@@ -95,11 +95,20 @@ def test_large_offsets_converge_to_the_goal():
 def test_goal_from_command_is_ahead_in_the_heading():
     R = rotation_rpy(0.05, -0.09, np.pi / 2)  # facing +y
     p = np.array([1.0, 2.0, 0.77])
-    np.testing.assert_allclose(goal_from_command(p, R, [1.0, 0.0]), [1.0, 4.5, 0.77], atol=1e-12)
+    np.testing.assert_allclose(
+        goal_from_command(p, R, [1.0, 0.0], 2.5), [1.0, 4.5, 0.77], atol=1e-12
+    )
     np.testing.assert_allclose(
         goal_from_command(p, R, [0.0, 1.0], 2.0), [-1.0, 2.0, 0.77], atol=1e-12
     )
     assert yaw_of(R) == pytest.approx(np.pi / 2)
+
+
+def test_carrot_goal_is_the_commanded_displacement_over_the_horizon_ahead():
+    R = np.stack([rotation_rpy(0.0, 0.0, np.pi / 2), np.eye(3)])  # facing +y, facing +x
+    path = np.array([[1.0, 2.0, 0.77], [0.0, 0.0, 0.8]])
+    goal = CarrotGoal(factor=0.25, horizon=1.2)(path, R, np.array([[1.0, 0.0], [0.0, -0.5]]))
+    np.testing.assert_allclose(goal, [[1.0, 2.3, 0.77], [0.0, -0.15, 0.8]], atol=1e-12)
 
 
 def test_reached_goal_radius():

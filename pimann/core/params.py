@@ -248,7 +248,7 @@ def _fields_of(value: Any) -> Any:
 # the rollout keys a protocol may set (the rest of `rollout` holds for it too)
 PROTOCOL_KEYS = (
     "k0", "k1", "goal_factor", "goal_radius", "command_blend_tau", "planar_steering",
-    "held_command", "start_history", "start_pose",
+    "start_history",
 )  # fmt: skip
 
 
@@ -275,17 +275,8 @@ class RolloutParams:
     stop_blend_s: NonNegative  # s over which the joints return to the standing pose on a stop
     stop_timeout_s: NonNegative  # s after 'stand' that a steered stop happens even off the goal
     planar_steering: Bool  # authors' code: horizontal position error in the yaw frame only
-    held_command: Literal["progress", "carrot"]  # how the goal moves while a command holds
     pose_feedback: Literal["predicted", "generated"]  # p, psi fed back: y_i's or the rollout's
-    # sdot fed back: the network's sdot_i | (s_i - s_{i-1}) / dt of its predicted joints
-    joint_velocity_feedback: Literal["predicted", "differenced"]
-    # s_i = b * predicted s_i + (1 - b) * (s_{i-1} + dt * predicted sdot_i); 1: the paper
-    joint_position_blend: Annotated[Float, Field(ge=0, le=1)]
-    # the base orientation: integrated (the paper: R exp(omega dt)) | odometry (the support
-    # foot keeps its orientation, as leg odometry keeps its corner's position)
-    base_orientation: Literal["integrated", "odometry"]
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
-    start_pose: Literal["data", "robot"]  # standing pose of a start and a stop (standing.py)
     scenarios: dict[Str, list[_Command]]
     scenario_names: list[Str]  # the scenarios the DVC rollout stage generates
     # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)

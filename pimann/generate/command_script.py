@@ -8,8 +8,8 @@ per-step commands of every row are laid out once, before the first step (`Comman
 Scripts from the data (the command-following benchmark, beyond the paper):
 `clip_commands`: a clip's own base motion (pimann.learn.motion_classes.base_motion: planar
 velocity in the heading frame and yaw rate, centred `WINDOW_S` means) cut into
-piecewise-constant segments the generator reads (pimann.generate.generator: `MotionSegment` vx, vy,
-yaw_rate, duration, or `StandSegment`). Frame by frame, a segment ends where the smoothed
+piecewise-constant segments the generator reads (pimann.generate.rollout_batch: `MotionSegment`
+vx, vy, yaw_rate, duration, or `StandSegment`). Frame by frame, a segment ends where the smoothed
 command departs from the segment's running mean by more than `VELOCITY_STEP` (planar) or
 `YAW_RATE_STEP`, or where the frame's motion class differs from that of the mean, once the
 segment has lasted `MIN_SEGMENT_S`; the running mean starts one window after a cut (before,

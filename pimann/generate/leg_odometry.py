@@ -1,9 +1,8 @@
 """Leg odometry of generated rollouts, vectorised over a batch of rollouts (rows).
 
 Generation places the base so that the support point (the lowest sole corner) stays where it
-was (pimann.generate.generator's rule 4), and, with `rollout.base_orientation: odometry`, turns
-it so that the support foot keeps its orientation (`Odometry.orient`). That needs both sole
-frames in the base frame at every step of every rollout: one pinocchio pass per rollout and step
+was (pimann.generate.rollout_batch's rule 4). That needs both sole frames in the base frame
+at every step of every rollout: one pinocchio pass per rollout and step
 would be a Python loop over rows, so the two leg chains are evaluated here in numpy, all rows
 at once, on the geometry the torch kinematics (pimann.learn.kinematics_torch) reads from the
 pinocchio model: one 3x3 product per joint depth, whatever the number of rows.
@@ -74,40 +73,10 @@ class Odometry:
         self.support_corner = np.zeros(rows, dtype=int)  # and which of its corners
         self.anchor = np.zeros((rows, 3))
         self.world_corners = np.zeros((rows, len(FEET), 3, len(SOLE_CORNERS)))
-        # the orientation hold (`orient`): the foot whose orientation is held (-1: none yet)
-        self.held_foot = np.full(rows, -1)
-        self.held_rotation = np.tile(np.eye(3), (rows, 1, 1))
-        self.world_rotations = np.tile(np.eye(3), (rows, len(FEET), 1, 1))
-
-    def orient(self, rotation: np.ndarray, joints: np.ndarray, index: np.ndarray) -> np.ndarray:
-        """Base orientations (n, 3, 3) of rows `index` that keep the support foot's orientation.
-
-        The support foot (the one with the lowest corner, `rotation` the candidate base
-        orientations) keeps the world orientation it had at the last `place`, held while it
-        stays the support foot: the base turns as the legs turn it.
-        """
-        transforms = self.frames.transforms(joints)
-        heights = (rotation[:, None, 2:3] @ (transforms[:, :, :3] @ self.corners))[:, :, 0]
-        foot = _support_foot(heights)
-        rows = np.arange(len(index))
-        changed = foot != self.held_foot[index]
-        held = np.where(
-            changed[:, None, None], self.world_rotations[index, foot], self.held_rotation[index]
-        )
-        self.held_foot[index], self.held_rotation[index] = foot, held
-        return held @ np.swapaxes(transforms[rows, foot, :3, :3], 1, 2)
 
     def rotated_corners(self, rotation: np.ndarray, joints: np.ndarray) -> np.ndarray:
         """(B, 2, 3, C) sole corners relative to the base in world axes (base at the origin)."""
-        return self._in_world_axes(rotation, self.frames.transforms(joints))[0]
-
-    def _in_world_axes(
-        self, rotation: np.ndarray, transforms: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """(sole corners (B, 2, 3, C), sole rotations (B, 2, 3, 3)) in world axes, from the
-        soles' base-frame `transforms` (B, 2, 4, 4)."""
-        axes = rotation[:, None]
-        return axes @ (transforms[:, :, :3] @ self.corners), axes @ transforms[:, :, :3, :3]
+        return rotation[:, None] @ (self.frames.transforms(joints)[:, :, :3] @ self.corners)
 
     def place(
         self, rotation: np.ndarray, joints: np.ndarray, first: np.ndarray | None = None
@@ -116,9 +85,7 @@ class Odometry:
 
         Returns (base position, lowest corner height of each foot (B, 2), support foot (B,)).
         """
-        rotated, self.world_rotations = self._in_world_axes(
-            rotation, self.frames.transforms(joints)
-        )
+        rotated = self.rotated_corners(rotation, joints)
         heights = rotated[:, :, 2]  # (B, 2, C)
         foot = _support_foot(heights)
         corner = heights[self.rows, foot].argmin(axis=1)

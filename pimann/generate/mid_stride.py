@@ -46,7 +46,7 @@ from pimann.learn.teacher_forcing import LEG_JOINTS as LEGS
 from pimann.learn.teacher_forcing import add_models_argument, table_over_models
 
 if TYPE_CHECKING:
-    from pimann.generate.generator import Rollout
+    from pimann.generate.rollout_batch import Rollout
 
 SETTLE_S = 2.0  # s left out at the start of each rollout before its speed is measured
 MOVING = ("forward", "backward", "side", "diagonal", "turning")
@@ -119,7 +119,7 @@ def sustainment(
 ) -> pd.DataFrame:
     """One row per model seed and held-out clip of `collection` (the features stage's split)
     in motion at its middle frame; `steering`: the rollouts steered (rollout.k0, k1)."""
-    from pimann.generate.generator import RolloutSpec, generate_batch
+    from pimann.generate.rollout_batch import RolloutSpec, generate_batch
     from pimann.learn.model_files import load_model
 
     starts = [(name, *clip_start(t, seconds)) for name, t in held_out_clips(collection, params)]

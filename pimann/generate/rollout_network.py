@@ -1,5 +1,5 @@
 """The network as a rollout calls it: physical inputs in, physical outputs out, a batch of
-rows at a time, at the least overhead a CPU allows (pimann.generate.batch_generate)."""
+rows at a time, at the least overhead a CPU allows (pimann.generate.batch_generator)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ class NumpyMANN:
     layer at 2 to 8 rows (8x one row's matrix-vector product), which is what a batch's last
     rows (the longest scripts) cost; transposed, 2 rows take half that and 32 rows 20% less.
     One row keeps x @ W (a matrix-vector product).
-    Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generate.py). A
+    Equal to `MANN.forward` to rounding (float32: 1e-7; tests/test_batch_generator.py). A
     snapshot: later changes to the model's parameters are not seen.
     """
 

@@ -64,11 +64,11 @@ def _generate_seed(
     job: tuple[Path, list[tuple[str, list[Segment], bool, Path, str | None]], Params],
 ) -> str | None:
     """One seed's rollouts, generated together in batches
-    (pimann.generate.generator.generate_files);
+    (pimann.generate.rollout_batch.generate_files);
     the error that stopped them (naming the file), or None."""
     import torch
 
-    from pimann.generate.generator import FileJob, generate_files
+    from pimann.generate.rollout_batch import FileJob, generate_files
 
     torch.set_num_threads(1)  # one process per core
     model_dir, files, params = job
@@ -104,8 +104,8 @@ def run_rollouts(
     scenarios and the benchmark clips), with and without steering.
 
     One job per seed (`workers` processes): its scripts x steering advance together as one
-    batch (pimann.generate.batch_generate). Written into `out_dir` (= results/rollouts/<model>) as a
-    whole, atomically.
+    batch (pimann.generate.batch_generator). Written into `out_dir` (= results/rollouts/<model>) as
+    a whole, atomically.
     """
     scripts = rollout_scripts(params)
     runs = [(sc, script, None) for sc, script in scripts.items()] + [

@@ -7,12 +7,16 @@ on the base pose towards a user goal removes the drift without retraining:
     omega_c = omega_hat - k1 vee(skew(R_d^T R))        (base frame)
 
 With zero network velocities, p_dot = R v_c = -k0 (p - p_d) decays exponentially at rate k0,
-and for small orientation errors (R_d^T R ~ I + [theta]x) theta_dot = -k1 theta. The goal is set
-`factor` times the commanded displacement ahead when the command changes; motion stops within
-`radius` of it (authors' code: 2.5 and 0.3 m, horizontal distances, heading = base yaw).
+and for small orientation errors (R_d^T R ~ I + [theta]x) theta_dot = -k1 theta. The goal is
+`factor` times the commanded displacement ahead (`GoalRule`, chosen once per generator); motion
+stops within `radius` of it (authors' code: 2.5 and 0.3 m, horizontal distances, heading = base
+yaw).
 """
 
 from __future__ import annotations
+
+import dataclasses
+from typing import Protocol
 
 import numpy as np
 
@@ -55,7 +59,7 @@ def steer(
 
 
 def goal_from_command(
-    p: np.ndarray, R: np.ndarray, command_displacement: np.ndarray, factor: float = 2.5
+    p: np.ndarray, R: np.ndarray, command_displacement: np.ndarray, factor: float
 ) -> np.ndarray:
     """Goal position: `factor` x the commanded displacement (heading frame, x forward, y left;
     2 or 3 components, z ignored) ahead of the base, at the base's current height."""
@@ -67,6 +71,28 @@ def goal_from_command(
     goal[..., 0] = p[..., 0] + cos * command[..., 0] - sin * command[..., 1]
     goal[..., 1] = p[..., 1] + sin * command[..., 0] + cos * command[..., 1]
     return goal
+
+
+class GoalRule(Protocol):
+    """Where the goal p_d is while a motion command holds: one class per rule, so the
+    generator picks its rule once instead of testing a switch every step."""
+
+    def __call__(self, path: np.ndarray, desired: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        """Goals (B, 3) from the commanded path's points (B, 3), the desired orientations R_d
+        (B, 3, 3) and the commanded velocities (B, 2, heading frame)."""
+        ...
+
+
+@dataclasses.dataclass(frozen=True)
+class CarrotGoal:
+    """The authors' goal, kept ahead as a held joystick keeps it: `factor` x the commanded
+    displacement over `horizon` s (the output window) ahead of the path's point."""
+
+    factor: float
+    horizon: float  # s
+
+    def __call__(self, path: np.ndarray, desired: np.ndarray, velocity: np.ndarray) -> np.ndarray:
+        return goal_from_command(path, desired, velocity * self.horizon, self.factor)
 
 
 def reached_goal(p: np.ndarray, p_goal: np.ndarray, radius: float = 0.3) -> np.ndarray | bool:

@@ -1,7 +1,7 @@
 """Where does a model's gait fail: in the base motion it generates, or in its legs?
 
 Each benchmark clip (held-out and training, pimann.generate.benchmark_clips) is entered at its first
-sample's step with the data's whole state (pimann.generate.batch_generate.data_start: velocity
+sample's step with the data's whole state (pimann.generate.batch_generator.data_start: velocity
 history,
 future window, joints, pose), and rolled out unsteered with no command blend for up to
 `--seconds`, two ways in one batch:
@@ -36,7 +36,7 @@ from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory
-from pimann.generate.batch_generate import BatchGenerator, data_start
+from pimann.generate.batch_generator import BatchGenerator, data_start
 from pimann.generate.benchmark_clips import held_out_clips, training_clips
 from pimann.generate.command_script import ScriptSteps
 from pimann.generate.mid_stride import ratio_along

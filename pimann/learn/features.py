@@ -56,7 +56,7 @@ def first_differences(
     Velocities are first differences ending at each frame, as the authors' features: v_t =
     (p_t - p_{t-1}) / dt, omega_t = log(R_t R_{t-1}^T) / dt (world frame), sdot_t = (s_t -
     s_{t-1}) / dt, so that s_t = s_{t-1} + dt sdot_t and R_t = R_{t-1} exp(R_t^T omega_t dt)
-    hold exactly: what the rollout integrates (pimann.generate.batch_generate). Frame 0 has no
+    hold exactly: what the rollout integrates (pimann.generate.batch_generator). Frame 0 has no
     difference: NaN. `projected`: the base orientation kept to its yaw (the baseline's frame).
     """
     dt = 1.0 / trajectory.rate_hz

@@ -7,7 +7,7 @@ first step (0.3 rad of the shoulders in 20 ms), which shows as a base jump and a
 dip at t = 0. The data's standing pose is the medoid of the training clips' standing frames
 (pimann.learn.motion_classes): one real frame, so joints and base tilt belong together and its
 retargeted feet are flat. The features stage computes it, training keeps it with the model
-(meta.json "standing"), generation uses it (`rollout.start_pose: data`).
+(meta.json "standing"), generation starts from it.
 """
 
 from __future__ import annotations

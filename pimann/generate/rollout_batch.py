@@ -16,11 +16,8 @@ One network step per frame (50 Hz) from the standing configuration, driven by a 
    with w = (t / window end)^tau (`rollout.command_blend_tau`; the sample at t = 0 stays the
    network's own; null: no blend), then v_c = v - k0 R^T (p - p_d) and omega_c = omega - k1
    vee(skew(R_d^T R)) with steering.
-3. Joints s_i from y_i (`rollout.joint_position_blend` b < 1: b s_i + (1 - b)(s_{i-1} + dt
-   sdot_i), towards the predicted velocities integrated); R_{i+1} = R_i exp(omega_c(t=0) dt)
-   for the next step (`rollout.base_orientation: odometry`: R_i is first replaced by the
-   orientation that keeps the support foot's world orientation, held while it stays the
-   support foot, as rule 4 holds its corner's position).
+3. Joints s_i and joint velocities sdot_i: y_i's; R_{i+1} = R_i exp(omega_c(t=0) dt) for the
+   next step.
 4. Base position by leg odometry: the support point (the lowest sole corner of the two feet)
    stays fixed in the world while it stays the support point; when it changes, the new one is
    pinned at its last world position on the ground (z = 0); a change of corner on the same foot
@@ -33,17 +30,13 @@ Goal rule (authors' values k0 = 0.2, k1 = 2.0, goal factor 2.5, radius 0.3 m; th
 here k1 = 4.0 and goal factor 0.25, docs/departures.md). When a motion
 command starts, the desired heading R_d takes the base's current yaw (standing roll and pitch)
 and a commanded path starts at the base; while the command holds, yaw_d += yaw_rate dt and the
-goal p_d is the path's current point, which advances (`rollout.held_command`)
-- `carrot` (default, the authors' goal kept ahead while the command holds, a held joystick):
-  the path's point moves at the commanded velocity and the goal is `goal_factor` x the
-  commanded displacement over the output window (v x 1.2 s) ahead of it. Its pull
-  k0 x goal_factor x v x 1.2 s (+6% of v at the default 0.25) and the lag the robot builds up
-  behind the moving point make a network that walks slower than commanded catch up;
-  the authors' 2.5 (+60%) overshoots backward. The legs carry the base (leg odometry below), so the
-  speed a rollout reaches is the legs' own, not the steering's;
-- `progress`: along the commanded direction by as much as the robot itself went, so steering
-  corrects the lateral and heading drift and leaves the speed to the network (`goal_factor` is
-  not used).
+path's point moves at the commanded velocity and the goal p_d is `goal_factor` x the commanded
+displacement over the output window (v x 1.2 s) ahead of it (pimann.generate.steering
+.CarrotGoal: the authors' goal kept ahead while the command holds, a held joystick). Its pull
+k0 x goal_factor x v x 1.2 s (+6% of v at 0.25) and the lag the robot builds up behind the
+moving point make a network that walks slower than commanded catch up; the authors' 2.5 (+60%)
+overshoots backward. The legs carry the base (leg odometry below), so the speed a rollout
+reaches is the legs' own, not the steering's.
 On 'stand' the command velocity is zero and the goal freezes at the path's point; with steering
 the robot stops once its base is within `goal_radius` of it horizontally, or has passed it
 along the last commanded direction, or `stop_timeout_s` after the 'stand'; without steering it
@@ -55,7 +48,7 @@ A scenario that ends on a motion command ends walking, as the paper's 10 s test.
 The ground-projected baseline (layout variant `ground_projected`) is rolled out in its own
 frame: the base orientation keeps yaw only (roll and pitch 0), as in its training data.
 
-Batches. These rules run in pimann.generate.batch_generate, vectorised over rollouts of one model
+Batches. These rules run in pimann.generate.batch_generator, vectorised over rollouts of one model
 (one network call per step for every walking row, vectorised leg odometry
 (pimann.generate.leg_odometry),
 contacts and steering; each row its own script, stops and restarts). `generate_rollout` is a
@@ -93,7 +86,7 @@ from pimann.core.params import (
 from pimann.core.paths import repo_relative
 from pimann.core.robot import Robot, load_robot
 from pimann.core.trajectory import Trajectory, write_trajectory
-from pimann.generate.batch_generate import BatchGenerator
+from pimann.generate.batch_generator import BatchGenerator
 from pimann.generate.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.standing import StandingPose
@@ -141,7 +134,8 @@ def generate_batch(
 ) -> list[Rollout]:
     """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
-    `standing`: the pose to start from and return to (default: the robot's nominal one);
+    `standing`: the pose to start from and return to (default: the robot's nominal one;
+    generated files start from the model's, `generate_files`);
     `start_joint_velocities` (nj,): the joints' velocities at the start (default: at rest;
     pimann.generate.mid_stride starts rollouts inside a clip's gait);
     `timings`: seconds per section of the step (`SECTIONS`, "record") are added to it.
@@ -221,7 +215,7 @@ def generate_rollout(
 ) -> Rollout:
     """Roll the network out over `scenario`; see the module docstring for every rule.
 
-    A batch of one (pimann.generate.batch_generate.generate_batch): the same trajectory as its row
+    A batch of one (pimann.generate.batch_generator.generate_batch): the same trajectory as its row
     of any batch. `standing`: the pose to start from and return to (default: the nominal one).
     """
     spec = RolloutSpec(list(scenario), bool(steering), source, attrs)
@@ -291,15 +285,12 @@ def _model_rollouts(
 
     model, layout, stats, meta = load_model(model_dir)
 
-    def standing_pose(rollout: RolloutParams) -> StandingPose:
-        if rollout.start_pose != "data":
-            return StandingPose.nominal()
-        try:
-            return StandingPose.from_json(meta.get("standing"))
-        except (KeyError, TypeError, ValueError) as error:
-            raise PimannError(
-                Path(model_dir) / META_FILE, f"standing: not a standing pose ({error!r})"
-            ) from None
+    try:  # the data's standing pose the model was trained with (pimann.learn.standing)
+        standing = StandingPose.from_json(meta.get("standing"))
+    except (KeyError, TypeError, ValueError) as error:
+        raise PimannError(
+            Path(model_dir) / META_FILE, f"standing: not a standing pose ({error!r})"
+        ) from None
 
     model_attrs = {
         key: meta[key] for key in ("pi_weight", "seed", "variant") if meta.get(key) is not None
@@ -311,7 +302,6 @@ def _model_rollouts(
         groups.setdefault((job.protocol, job.steering and job.protocol is not None), []).append(job)
     for group in groups.values():
         rollout = group[0].rollout_params(params)
-        standing = standing_pose(rollout)
         ordered = sorted(group, key=lambda job: -len(scenario_steps(job.script, rate)))
         for first in range(0, len(ordered), batch_size):
             chunk = ordered[first : first + batch_size]

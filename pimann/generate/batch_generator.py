@@ -4,17 +4,14 @@ Evaluation multiplies rollouts (scenarios x benchmark clips x steering x seeds) 
 evaluated for one sample at a time is mostly overhead: a batch of B rows (each its own
 script and steering switch) costs one network call, one vectorised leg-odometry pass
 (pimann.generate.leg_odometry), one Schmitt-trigger update and one steering correction per step,
-with no Python loop over rows inside a step. The rules are pimann.generate.generator's (its module
-docstring); each row keeps its own state (stopped, stop blend, goal, path, restart).
-`pimann.generate.generator.generate_batch` drives a `BatchGenerator` over the rows' scripts and a
-single rollout (`generate_rollout`) is a batch of one, so a row of a batch equals the same rollout
-alone (float64: to rounding).
+with no Python loop over rows inside a step. The rules are pimann.generate.rollout_batch's (its
+module docstring); each row keeps its own state (stopped, stop blend, goal, path, restart).
+`pimann.generate.rollout_batch.generate_batch` drives a `BatchGenerator` over the rows' scripts and
+a single rollout (`generate_rollout`) is a batch of one, so a row of a batch equals the same
+rollout alone (float64: to rounding).
 
 Rows end at different steps: a row past its script's end is held still (stopped) and its
 frames are not kept; the network is evaluated on the walking rows only.
-
-Over 400 lines: one `BatchGenerator` whose per-step state (stop blend, goals, odometry,
-contacts) is one unit; the rules it shares with single rollouts live in generator.py.
 """
 
 from __future__ import annotations
@@ -42,7 +39,7 @@ from pimann.core.rotations import (
 from pimann.core.trajectory import Trajectory
 from pimann.generate.leg_odometry import Odometry
 from pimann.generate.rollout_network import RolloutNetwork
-from pimann.generate.steering import goal_from_command, steer
+from pimann.generate.steering import CarrotGoal, steer
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.features import clip_phase, first_differences
 from pimann.learn.future_window import command_weights, next_future_matrix
@@ -93,8 +90,8 @@ def data_start(
 
 
 class BatchGenerator:
-    """The rows' state and the per-step rules (pimann.generate.generator's docstring), all rows at
-    once.
+    """The rows' state and the per-step rules (pimann.generate.rollout_batch's docstring), all
+    rows at once.
 
     Per step only what some row needs is computed (a stop check while a row stands, the blend
     while a row returns to standing, steering for steered rows): one rollout alone costs
@@ -129,6 +126,7 @@ class BatchGenerator:
             raise PimannError(None, "the input window's offsets must increase")
         self.future_matrix = next_future_matrix(layout)
         self.horizon = out_offsets.max() / layout.rate_hz
+        self.goal_rule = CarrotGoal(params.goal_factor, self.horizon)  # while a command holds
         self.weights = command_weights(layout.output_offsets, params.command_blend_tau)[:, None]
         self.keep = 1.0 - self.weights
         rpy = np.array([*standing.roll_pitch, 0.0])
@@ -167,7 +165,6 @@ class BatchGenerator:
         # the command side
         self.goal, self.desired_yaw = np.full((rows, 3), np.nan), self.yaw.copy()
         self.path, self.has_path = np.zeros((rows, 3)), np.zeros(rows, dtype=bool)
-        self.last_position = self.position.copy()
         self.heading_velocity = np.zeros((rows, 2))  # the last motion command's (heading frame)
         self.stopped, self.stand_since = np.ones(rows, dtype=bool), np.zeros(rows, dtype=int)
         self.stop_step, self.blending = np.zeros(rows, dtype=int), np.zeros(rows, dtype=bool)
@@ -221,7 +218,7 @@ class BatchGenerator:
         )
         self.contacts = self.trigger.state
         self.stopped[:] = False
-        self.desired_yaw, self.last_position = self.yaw.copy(), self.position.copy()
+        self.desired_yaw = self.yaw.copy()
 
     @property
     def base_velocity(self) -> np.ndarray:
@@ -254,21 +251,8 @@ class BatchGenerator:
         move = ~stand  # a held command: the path (and the goal) move with it
         self.desired_yaw = self.desired_yaw + np.where(move, yaw_rate * self.dt, 0.0)
         direction = from_heading_frame(velocity, self.desired_yaw)
-        if self.params.held_command == "carrot":
-            self.path[:, :2] += np.where(move[:, None], direction * self.dt, 0.0)
-            goal = goal_from_command(
-                self.path, self.desired(slice(None)), velocity * self.horizon,
-                self.params.goal_factor,
-            )  # fmt: skip
-        else:  # along the commanded direction, as far as the robot went
-            norm = np.hypot(direction[:, 0], direction[:, 1])
-            along = move & (norm > 0)
-            unit = direction / np.where(along, norm, 1.0)[:, None]
-            moved = self.position[:, :2] - self.last_position[:, :2]
-            progress = unit * (unit[:, 0] * moved[:, 0] + unit[:, 1] * moved[:, 1])[:, None]
-            self.path[:, :2] += np.where(along[:, None], progress, 0.0)
-            goal = self.path
-        self.last_position = self.position
+        self.path[:, :2] += np.where(move[:, None], direction * self.dt, 0.0)
+        goal = self.goal_rule(self.path, self.desired(slice(None)), velocity)
         self.goal = np.where(move[:, None], goal, self.goal)
         if not active.all():  # past the script's end: held still, not kept
             self.blending &= active | self.stopped
@@ -381,21 +365,8 @@ class BatchGenerator:
         now_velocity[:, 0], now_velocity[:, 1] = linear[:, now], angular[:, now]
         # in the base frame at k + 1 (as the features write it); kept in the world frame
         self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)  # R v
-        joints = y[:, ys["joints"]]
-        if self.params.base_orientation == "odometry":  # the support foot's held (module doc)
-            base = rotation[rows] = self.odometry.orient(base, joints, index)
-            ahead = base @ exp_so3(angular[:, now] * self.dt)
-            ahead = self.next_rotation[rows] = yaw_only(ahead) if self.projected else ahead
-            self.history[index, head] = now_velocity @ np.swapaxes(ahead, 1, 2)
-        blend = self.params.joint_position_blend
-        if blend < 1.0:  # towards the predicted velocities integrated (module docstring)
-            integrated = self.joints[rows] + self.dt * y[:, ys["joint_velocities"]]
-            joints = blend * joints + (1.0 - blend) * integrated
-        if self.params.joint_velocity_feedback == "differenced":
-            self.joint_velocities[rows] = (joints - self.joints[rows]) / self.dt
-        else:
-            self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
-        self.joints[rows] = joints
+        self.joint_velocities[rows] = y[:, ys["joint_velocities"]]
+        self.joints[rows] = y[:, ys["joints"]]
         if self.layout.gait_phase:
             self.phase[rows] = unit_phase(y[:, ys["gait_phase"]])
 
@@ -421,7 +392,6 @@ class BatchGenerator:
             still = np.ones(len(rotation), dtype=bool)
             still[walking] = False
             self.next_rotation[still] = rotation[still]
-            self.odometry.held_foot[still] = -1  # a restart holds its support foot anew
         heading = yaw_of(rotation)
         turn = heading - self.heading
         self.yaw, self.heading = self.yaw + np.arctan2(np.sin(turn), np.cos(turn)), heading

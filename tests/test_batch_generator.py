@@ -1,4 +1,4 @@
-"""Batched generation (pimann.generate.batch_generate): a row of a batch is the same rollout alone.
+"""Batched generation (pimann.generate.batch_generator): a row of a batch is the same rollout alone.
 
 Float64 models (the analytic gait of test_generate and a tiny trained MANN), so the only
 difference a batch could make is rounding; rows with different scripts (stand segments
@@ -16,9 +16,9 @@ from builders import IDENTITY, LAYOUT, GaitModel
 
 from pimann.core.contacts import FEET
 from pimann.core.params import ModelParams, MotionSegment, StandSegment
-from pimann.generate.batch_generate import BatchGenerator
-from pimann.generate.generator import RolloutSpec, generate_batch, generate_rollout
+from pimann.generate.batch_generator import BatchGenerator
 from pimann.generate.leg_odometry import SoleFrames
+from pimann.generate.rollout_batch import RolloutSpec, generate_batch, generate_rollout
 from pimann.generate.rollout_network import NumpyMANN
 from pimann.learn.feature_layout import Normalisation
 from pimann.learn.features import clip_features
@@ -103,10 +103,9 @@ def params():
     return load_params()
 
 
-@pytest.mark.parametrize("held", ["progress", "carrot"])
-def test_gait_rows_equal_their_rollouts_alone(robot, params, held):
+def test_gait_rows_equal_their_rollouts_alone(robot, params):
     model = GaitModel(robot, bias=(0.02, 0.05)).double()
-    rows = batch_against_alone(model, IDENTITY, params, robot, held_command=held)
+    rows = batch_against_alone(model, IDENTITY, params, robot)
     assert [len(r.trajectory) for r in rows[:4]] == [191, 126, 116, 86]
     stops = np.diff(rows[0].stopped.astype(int))
     assert np.flatnonzero(stops)[0] == 15  # walks from frame 16
