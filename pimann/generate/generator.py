@@ -286,7 +286,7 @@ def _model_rollouts(
     Attributes as the files have always had them: scenario, model_dir, script, pi_weight,
     seed, variant, start_pose, steering.
     """
-    from pimann.generate.rollout_layout import SCRIPT_ATTR, script_json
+    from pimann.core.rollout_files import SCRIPT_ATTR, script_json
     from pimann.learn.model_files import META_FILE, load_model
 
     model, layout, stats, meta = load_model(model_dir)
