@@ -56,7 +56,7 @@ def _closed_loop(solver: str, steps: int = 2) -> tuple[float, float, float, bool
     """The MuJoCo loop with the online controller and `solver`: its real-time factor, median
     and p95 solve, and whether the robot fell."""
     from pimann.core.robot import load_robot
-    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.closed_loop import simulate_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
 

@@ -20,10 +20,10 @@ import pinocchio as pin
 
 from pimann.core.params import load_params
 from pimann.core.robot import load_robot
+from pimann.sim.closed_loop import simulate_plan
 from pimann.sim.dcm import plan_dcm
 from pimann.sim.footsteps import extract_footsteps
 from pimann.sim.model import build_sim_model
-from pimann.sim.run import simulate_plan
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.wbc import standing_pose
 

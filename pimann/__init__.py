@@ -1,6 +1,6 @@
 """pimann: physics-informed MANN trajectory generation for ergoCub (D'Elia et al., IROS 2025).
 
-Under 60 lines: the stages are its subpackages (README: layout).
+The stages are its subpackages (README: layout).
 """
 
 __version__ = "0.1.0"

@@ -121,8 +121,8 @@ def cmd_metrics(args: argparse.Namespace) -> None:
 
 def cmd_simulate(args: argparse.Namespace) -> None:
     from pimann.core.trajectory import read_trajectory
-    from pimann.sim.results import write_simulation
-    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.closed_loop import simulate_trajectory
+    from pimann.sim.simulation_files import write_simulation
     from pimann.sim.video import check_video_path, render_simulation
 
     params = _params(args).simulate

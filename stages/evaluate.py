@@ -2,7 +2,7 @@
 timeseries/*.csv and claims.md (pimann.evaluate.evaluation, pimann.evaluate.claims), with the
 retargeted data's own
 sliding level (pimann.evaluate.data_reference) beside, and command_following.csv, .md and .png
-(pimann.evaluate.following)."""
+(pimann.evaluate.command_following_benchmark)."""
 
 from __future__ import annotations
 

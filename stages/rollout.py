@@ -6,7 +6,7 @@ rolls out every seed of the training output in every scenario of `rollout.scenar
 and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>)
 and (`rollout.benchmark_train_clips`) a few training clips' (train_<clip name>), with and
 without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
-the models' meta in <out>/models.json (layout: pimann.generate.rollout_layout).
+the models' meta in <out>/models.json (layout: pimann.core.rollout_files).
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@
 runs every rollout of `simulate.runs` (params.yaml) through footsteps -> DCM plan (offline)
 or the centroidal MPC replanned as it walks (online) -> whole-body IK + ZMP-CoM feedback ->
 MuJoCo and writes results/sim/<run>.h5, a video of the runs marked `video`, the push-recovery
-study of `simulate.pushes`, and the per-run summary (layout: pimann.sim.runs).
+study of `simulate.pushes`, and the per-run summary (layout: pimann.sim.run_list).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from pimann.core.logs import parse_stage_args
 from pimann.core.params import load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.stage import stage_entry
-from pimann.sim.runs import simulate_runs
+from pimann.sim.run_list import simulate_runs
 
 log = logging.getLogger("simulate")
 

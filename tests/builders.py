@@ -34,14 +34,14 @@ from pimann.core.robot import (
     Robot,
     load_robot,
 )
+from pimann.core.rollout_files import (
+    BASELINE,
+    RolloutKey,
+)
 from pimann.core.trajectory import Trajectory, write_collection, write_trajectory
 from pimann.evaluate.evaluation import provenance, write_results
 from pimann.generate.rollout_batch import (
     generate_rollout,
-)
-from pimann.generate.rollout_layout import (
-    BASELINE,
-    RolloutKey,
 )
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
 from pimann.learn.mann import MANN

@@ -14,6 +14,7 @@ from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, ProtocolParams, load_params
 from pimann.core.robot import CHEST_FRAME, STANDING_JOINTS
+from pimann.core.rollout_files import read_script, script_json
 from pimann.core.trajectory import Trajectory, read_trajectory
 from pimann.generate.adherent_rollout import (
     ADHERENT_CORNERS,
@@ -23,7 +24,6 @@ from pimann.generate.adherent_rollout import (
     generate_adherent,
     run_adherent_rollouts,
 )
-from pimann.generate.rollout_layout import read_script, script_json
 from pimann.learn.adherent import (
     AdherentLayout,
     BodyFrames,

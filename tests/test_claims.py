@@ -11,6 +11,7 @@ import pytest
 from builders import AGREEING, REFERENCE, crafted_metrics
 
 from pimann.core.params import load_params
+from pimann.core.rollout_files import BASELINE
 from pimann.evaluate.claims import (
     CONFIGURATION_HELD,
     FAILS,
@@ -23,7 +24,6 @@ from pimann.evaluate.claims import (
     data_claim,
     evaluate_claims,
 )
-from pimann.generate.rollout_layout import BASELINE
 
 ALL = [f"C{k}" for k in range(1, 15)]
 

@@ -27,10 +27,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, StandSegment, load_params
-from pimann.evaluate import command_following as cf
+from pimann.evaluate import command_following_measures as cf
+from pimann.evaluate.command_following_benchmark import summary_table
 from pimann.evaluate.command_following_figure import fig_command_following
 from pimann.evaluate.figure_style import style
-from pimann.evaluate.following import summary_table
 from pimann.generate.command_script import clip_commands, segment_class
 
 DT = 1.0 / RATE

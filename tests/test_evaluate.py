@@ -19,9 +19,10 @@ from builders import (
 
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
+from pimann.core.rollout_files import BASELINE, read_script, select_rows
 from pimann.core.trajectory import read_trajectory
 from pimann.evaluate.claims import claims_markdown
-from pimann.evaluate.command_following import summarise_following
+from pimann.evaluate.command_following_measures import summarise_following
 from pimann.evaluate.evaluation import (
     evaluate_all,
     provenance,
@@ -29,9 +30,8 @@ from pimann.evaluate.evaluation import (
     summarise,
     write_results,
 )
+from pimann.evaluate.evaluation_results import read_metrics
 from pimann.evaluate.metrics import trajectory_metrics
-from pimann.evaluate.results import read_metrics
-from pimann.generate.rollout_layout import BASELINE, read_script, select_rows
 from pimann.generate.rollouts import run_rollouts
 from pimann.report.key_metrics import following_metrics
 

@@ -10,14 +10,14 @@ import pinocchio as pin
 import pytest
 from builders import RATE, benchmark_collection, make_trajectory
 
+from diagnostics.gait_shape import COLUMNS, compare, gait_shape
 from pimann.core.contacts import true_runs
 from pimann.core.params import load_params
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
+from pimann.core.rollout_files import HELD_OUT
 from pimann.core.rotations import tilt_of
 from pimann.core.trajectory import write_trajectory
-from pimann.evaluate.gait_shape import COLUMNS, compare, gait_shape
 from pimann.generate.benchmark_clips import benchmark_clips
-from pimann.generate.rollout_layout import HELD_OUT
 from pimann.learn.motion_classes import class_counts, majority_class
 
 

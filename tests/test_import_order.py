@@ -16,6 +16,7 @@ import pytest
 from pimann.core.paths import PACKAGE_CHECKOUT
 
 PACKAGE = "pimann"
+DIAGNOSTICS = "diagnostics"  # beside pimann, above the whole pipeline
 # the pipeline's order; `render` (stick-figure drawing) sits above mocap, whose person it
 # draws, and below sim, whose videos it draws (the simulation reads only render's robot part)
 STAGE_ORDER = (
@@ -112,6 +113,38 @@ def test_imports_go_down_the_pipeline():
 def test_no_import_circle():
     cycle = find_cycle(import_graph(PACKAGE_CHECKOUT))
     assert cycle is None, "import circle: " + " -> ".join(cycle)
+
+
+def imports_of(path: Path, top: str) -> list[str]:
+    """The names of `top` or its modules that one file imports, function bodies included."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and not node.level:
+            names = [node.module or ""]
+        else:
+            continue
+        found += [name for name in names if name == top or name.startswith(top + ".")]
+    return found
+
+
+def test_the_pipeline_never_imports_the_diagnostics():
+    """The diagnostics sit above every stage: a stage importing one would rerun on its edits."""
+    files = sorted((PACKAGE_CHECKOUT / PACKAGE).rglob("*.py"))
+    files += sorted((PACKAGE_CHECKOUT / "stages").glob("*.py"))
+    problems = [
+        f"{path.relative_to(PACKAGE_CHECKOUT)} -> {name}"
+        for path in files
+        for name in imports_of(path, DIAGNOSTICS)
+    ]
+    assert files and not problems, "the pipeline imports the diagnostics:\n" + "\n".join(problems)
+
+
+def test_an_import_of_the_diagnostics_is_found(tmp_path: Path):
+    module = tmp_path / "m.py"
+    module.write_text("import os\n\ndef f():\n    from diagnostics.gait_shape import x\n")
+    assert imports_of(module, DIAGNOSTICS) == ["diagnostics.gait_shape"]
 
 
 @pytest.fixture

@@ -20,9 +20,9 @@ from builders import (
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.evaluate import command_following as cf
+from pimann.evaluate import command_following_measures as cf
 from pimann.evaluate.claims import HOLDS, evaluate_claims
-from pimann.evaluate.results import read_metrics
+from pimann.evaluate.evaluation_results import read_metrics
 from pimann.report.key_metrics import (
     MAX_VALUES,
     STATUS_CODES,

@@ -1,4 +1,4 @@
-"""Gait sustainment from a clip's mid-stride state (pimann.generate.mid_stride) on a tiny real
+"""Gait sustainment from a clip's mid-stride state (diagnostics.mid_stride) on a tiny real
 model."""
 
 from __future__ import annotations
@@ -10,15 +10,15 @@ import pytest
 import torch
 from builders import RATE, GaitModel, roll, synthetic_clip, synthetic_collection
 
-from pimann.core.params import ModelParams, MotionSegment, load_params
-from pimann.core.trajectory import write_collection
-from pimann.generate.mid_stride import (
+from diagnostics.mid_stride import (
     achieved,
     clip_start,
     leg_joint_agreement,
     network_ratio,
     sustainment,
 )
+from pimann.core.params import ModelParams, MotionSegment, load_params
+from pimann.core.trajectory import write_collection
 from pimann.generate.rollout_batch import RolloutSpec, generate_batch
 from pimann.learn.dataset import write_dataset
 from pimann.learn.features import build_dataset
@@ -117,7 +117,7 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
 
 
 def test_a_folder_without_models_gets_one_line(tmp_path, capsys):
-    from pimann.generate.mid_stride import main
+    from diagnostics.mid_stride import main
 
     assert main(["--models", str(tmp_path / "missing")]) == 2
     error = capsys.readouterr().err

@@ -1,4 +1,4 @@
-"""The rollouts' layout (pimann.generate.rollout_layout) and runner (pimann.generate.rollouts):
+"""The rollouts' layout (pimann.core.rollout_files) and runner (pimann.generate.rollouts):
 paths, the table's model names, and that both sit apart from the evaluation (the layout also apart
 from
 the generator)."""
@@ -19,9 +19,7 @@ from builders import benchmark_collection, tiny_models, walking_clip
 from pimann.core.errors import PimannError
 from pimann.core.params import MotionSegment, ProtocolParams, StandSegment, load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
-from pimann.generate.command_script import clip_commands
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     BASELINE,
     HELD_OUT,
     TRAINING,
@@ -38,6 +36,8 @@ from pimann.generate.rollout_layout import (
     select_rows,
     weight_label,
 )
+from pimann.generate.benchmark_clips import benchmark_clips, benchmark_scripts
+from pimann.generate.command_script import clip_commands
 from pimann.generate.rollouts import models_record, rollout_scripts
 from pimann.learn.model_files import model_seeds
 
@@ -142,7 +142,7 @@ GENERATION = (
     "module, forbidden",
     [
         ("pimann.generate.rollouts", EVALUATION),
-        ("pimann.generate.rollout_layout", EVALUATION + GENERATION),
+        ("pimann.core.rollout_files", EVALUATION + GENERATION),
     ],
 )
 def test_the_layout_imports_neither_generation_nor_evaluation(module, forbidden):
@@ -167,7 +167,7 @@ def test_rollout_users_import_the_layout_not_the_evaluation():
     ]
     for path in users:
         assert not _imports(path) & set(EVALUATION), path
-    assert "pimann.generate.rollout_layout" in _imports(REPO_ROOT / "pimann" / "sim" / "runs.py")
+    assert "pimann.core.rollout_files" in _imports(REPO_ROOT / "pimann" / "sim" / "run_list.py")
     assert "pimann.generate.rollouts" in _imports(REPO_ROOT / "stages" / "rollout.py")
 
 

@@ -12,10 +12,10 @@ from pimann.core.errors import PimannError
 from pimann.core.robot import JOINT_NAMES, LEFT_SOLE, RIGHT_SOLE
 from pimann.core.rotations import rot_z
 from pimann.core.trajectory import Trajectory
+from pimann.sim.closed_loop import simulate_trajectory
 from pimann.sim.com_reference import com_reference
 from pimann.sim.dcm import knot_times, lipm_matrices, lipm_residual, plan_dcm
 from pimann.sim.footsteps import extract_footsteps, relative
-from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import stepping_plan, stepping_trajectory
 
 WEIGHT = 1.0  # the tests' own CoM weight (params.yaml's today), not read from params.yaml

@@ -9,7 +9,7 @@ import pinocchio as pin
 import pytest
 
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, STANDING_JOINTS
-from pimann.sim.run import simulate_trajectory
+from pimann.sim.closed_loop import simulate_trajectory
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback
 

@@ -164,7 +164,7 @@ def test_an_unsolvable_horizon_is_an_error():
 
 def test_online_walk_in_mujoco(sim_robot, sim_params):
     """Two steps with the online controller: no fall, the feet land near the plan, MPC timed."""
-    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.closed_loop import simulate_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
 
@@ -186,9 +186,9 @@ def test_online_walk_in_mujoco(sim_robot, sim_params):
 
 def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot, sim_params):
     """An online run whose MPC cannot be solved is recorded; the offline run beside it walks."""
+    from pimann.core.rollout_files import RolloutKey, rollout_path
     from pimann.core.trajectory import write_trajectory
-    from pimann.generate.rollout_layout import RolloutKey, rollout_path
-    from pimann.sim.runs import simulate_runs
+    from pimann.sim.run_list import simulate_runs
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
 
@@ -267,8 +267,8 @@ def _two_step_walk(sim_robot, sim_params):
 
 def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
     """The offline controller in MuJoCo: 0 N walks on, a 400 N lateral push knocks it over."""
+    from pimann.sim.closed_loop import simulate_trajectory
     from pimann.sim.pushes import push_at_mid_single_support
-    from pimann.sim.run import simulate_trajectory
 
     fast, walk, plan = _two_step_walk(sim_robot, sim_params)
     outcomes = []
@@ -281,8 +281,8 @@ def test_a_hard_push_fells_the_robot_and_none_does_not(sim_robot, sim_params):
 
 def test_online_controller_steps_out_under_a_lateral_push(sim_robot, sim_params):
     """MuJoCo, 60 N for 0.1 s toward the swing foot: its landing moves out, the robot stays up."""
+    from pimann.sim.closed_loop import simulate_trajectory
     from pimann.sim.pushes import push_at_mid_single_support
-    from pimann.sim.run import simulate_trajectory
 
     fast, walk, plan = _two_step_walk(sim_robot, sim_params)
     swing = int(np.argmin([plan.feet[s].t_off[0] for s in (0, 1)]))
@@ -389,7 +389,7 @@ LOOP_AGREE = {
 @pytest.fixture(scope="module")
 def loop_horizons(sim_robot, sim_params) -> list[MpcProblem]:
     """Every horizon of a 2-step MuJoCo walk under the online controller (params' solver)."""
-    from pimann.sim.run import simulate_trajectory
+    from pimann.sim.closed_loop import simulate_trajectory
     from pimann.sim.synthetic import standing_feet, stepping_trajectory
     from pimann.sim.wbc import standing_pose
 

@@ -16,8 +16,9 @@ from pimann.cli import main
 from pimann.core.robot import JOINT_NAMES
 from pimann.core.trajectory import read_trajectory, write_trajectory
 from pimann.report.figures import _read_sim
+from pimann.sim.closed_loop import simulate_plan
 from pimann.sim.dcm import plan_dcm
-from pimann.sim.results import (
+from pimann.sim.simulation_files import (
     CONTACT_FORCE_N,
     distance_outside_polygon,
     foot_rectangle,
@@ -25,7 +26,6 @@ from pimann.sim.results import (
     write_simulation,
     zmp_outside_support,
 )
-from pimann.sim.run import simulate_plan
 from pimann.sim.synthetic import standing_feet, stepping_plan, stepping_trajectory
 from pimann.sim.video import render_simulation
 from pimann.sim.wbc import standing_pose
@@ -193,8 +193,8 @@ def test_render_produces_a_file(walk, sim_params, tmp_path, use_mujoco):
 
 def test_a_failed_run_is_recorded_and_the_stage_finishes(tmp_path, sim_robot, sim_params):
     from pimann.core.params import SimulateRun, load_params
-    from pimann.generate.rollout_layout import RolloutKey, rollout_path
-    from pimann.sim.runs import simulate_runs
+    from pimann.core.rollout_files import RolloutKey, rollout_path
+    from pimann.sim.run_list import simulate_runs
 
     q0 = standing_pose(sim_robot, sim_params)
     plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)

@@ -1,4 +1,4 @@
-"""Teacher-forced response per motion class (pimann.learn.teacher_forcing) on a tiny real
+"""Teacher-forced response per motion class (diagnostics.teacher_forcing) on a tiny real
 pipeline."""
 
 from __future__ import annotations
@@ -10,13 +10,13 @@ import pytest
 import torch
 from builders import synthetic_collection
 
+from diagnostics.teacher_forcing import _slope, class_response
 from pimann.core.params import ModelParams, load_params
 from pimann.core.trajectory import write_collection
 from pimann.learn.dataset import write_dataset
 from pimann.learn.features import build_dataset
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
-from pimann.learn.teacher_forcing import _slope, class_response
 
 
 def test_slope_of_a_scaled_copy_and_of_a_constant():
@@ -57,7 +57,7 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
 
 
 def test_models_folder_or_one_training_output_and_a_named_error(tmp_path, capsys):
-    from pimann.learn.teacher_forcing import main, model_folders
+    from diagnostics.teacher_forcing import main, model_folders
 
     (tmp_path / "w10" / "0").mkdir(parents=True)
     (tmp_path / "w10" / "0" / "meta.json").write_text("{}")
@@ -75,8 +75,8 @@ def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(rob
     flight, or without contact flags."""
     import pinocchio as pin
 
+    from diagnostics.teacher_forcing import contact_leg_velocity
     from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE
-    from pimann.learn.teacher_forcing import contact_leg_velocity
     from pimann.learn.training_loss import TrainingLoss
 
     params = load_params()
@@ -102,10 +102,10 @@ def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(rob
 
 def test_feet_motion_moves_with_the_leg_joints_only(real_walks):
     """L_F teacher-forced: the arms' joints do not move the soles, the legs' do."""
-    from pimann.core.robot import JOINT_NAMES
+    from diagnostics.teacher_forcing import feet_motion
+    from pimann.core.robot import JOINT_NAMES, LEG_JOINTS
     from pimann.learn.feature_layout import Normalisation, window_layout
     from pimann.learn.features import clip_features
-    from pimann.learn.teacher_forcing import LEG_JOINTS, feet_motion
     from pimann.learn.training_loss import TrainingLoss
 
     params = load_params()
@@ -130,9 +130,9 @@ def test_feet_motion_moves_with_the_leg_joints_only(real_walks):
 
 def test_integrated_joints_are_the_input_joints_moved_by_the_predicted_velocities(real_walks):
     """On the data's own outputs s_{i-1} + dt sdot_i is the data's s_i (first differences)."""
+    from diagnostics.teacher_forcing import integrated_joints
     from pimann.learn.feature_layout import Normalisation, window_layout
     from pimann.learn.features import clip_features
-    from pimann.learn.teacher_forcing import integrated_joints
 
     layout = window_layout(load_params().features, 50.0, "full")
     x, y, _ = clip_features(real_walks["walk"], layout)

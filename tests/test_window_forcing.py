@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
+from diagnostics.window_forcing import forced_rollouts, gait_measures
 from pimann.core.params import load_params
-from pimann.generate.window_forcing import forced_rollouts, gait_measures
 from pimann.learn.feature_layout import Normalisation, window_layout
 from pimann.learn.features import clip_features
 

@@ -1,6 +1,5 @@
 """What every stage shares: parameters, paths, errors, atomic writes, progress and logs, the
-stage entry and its data check, the robot, the trajectory file, rotations and foot contacts.
+stage entry and its data check, the robot, the trajectory file, the rollout files' layout,
+rotations and foot contacts.
 
-Imports nothing above it (tests/test_import_order.py).
-
-A package's summary only (hence so short): its modules hold the code."""
+Imports nothing above it (tests/test_import_order.py)."""

@@ -1,7 +1,4 @@
-"""Atomic outputs: a stage that fails leaves nothing half-written behind.
-
-Under 60 lines: one small concept every stage writing a file uses.
-"""
+"""Atomic outputs: a stage that fails leaves nothing half-written behind."""
 
 from __future__ import annotations
 

@@ -1,7 +1,4 @@
-"""The one error type users see: it names the file, where in it, and what is wrong.
-
-Under 60 lines: the error type and its helpers, imported by nearly every module.
-"""
+"""The one error type users see: it names the file, where in it, and what is wrong."""
 
 from __future__ import annotations
 

@@ -3,8 +3,6 @@ detail (per epoch, per item) at DEBUG behind -v, and spawned workers logging lik
 
 Not in pimann.core.stage: that module is a dependency of the retarget stage, and editing it would
 rerun the whole pipeline.
-
-Under 60 lines for that reason.
 """
 
 from __future__ import annotations

@@ -25,6 +25,10 @@ JOINT_NAMES: tuple[str, ...] = (
     "r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow",
 )  # fmt: skip
 N_JOINTS = len(JOINT_NAMES)
+# indices of the 12 leg joints (hips, knees, ankles) in JOINT_NAMES, for gait diagnostics
+LEG_JOINTS = [
+    k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))
+]
 
 STANDING_JOINTS = np.array([
     -0.1092, 0.0189, 0.0716, -0.0714, -0.0932, -0.0208,

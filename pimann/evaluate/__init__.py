@@ -1,4 +1,2 @@
 """Evaluation (paper Sec. IV): the metrics, the claims, command following, the data report and
-its reference, and the results reader the report's figures use.
-
-A package's summary only (hence so short): its modules hold the code."""
+its reference, and the results reader the report's figures use."""

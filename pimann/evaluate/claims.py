@@ -27,15 +27,15 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.params import EvaluateParams
-from pimann.evaluate.data_reference import reference_value
-from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     BASELINE,
     paper_baseline,
     pi_models,
     select_rows,
     weight_label,
 )
+from pimann.evaluate.data_reference import reference_value
+from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
 
 __all__ = [
     "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "POSITION",

@@ -1,13 +1,13 @@
 """The command-following figure: commanded against achieved speed per motion class.
 
-From `pimann.evaluate.command_following.summarise_following`'s table alone. One panel per steering
-condition (unsteered above), bars of the achieved speed along the command (median over seeds)
-per model and class, the commanded speed as a black tick over each bar and the +-25% criterion
-as a grey band behind it (whiskers of adjacent bars ran together into a comb). Turning in place
-is left out (no planar command: its yaw rate is in the table), as is standing (the stand
-criterion is a distance), and so is the training split where the table has one (the held-out
-split is the benchmark; the table carries both). Single IEEE column, legend above the panels
-(the profile footer sits in the lower corner).
+From `pimann.evaluate.command_following_measures.summarise_following`'s table alone. One panel per
+steering condition (unsteered above), bars of the achieved speed along the command (median over
+seeds) per model and class, the commanded speed as a black tick over each bar and the +-25%
+criterion as a grey band behind it (whiskers of adjacent bars ran together into a comb). Turning in
+place is left out (no planar command: its yaw rate is in the table), as is standing (the stand
+criterion is a distance), and so is the training split where the table has one (the held-out split
+is the benchmark; the table carries both). Single IEEE column, legend above the panels (the profile
+footer sits in the lower corner).
 """
 
 from __future__ import annotations
@@ -19,9 +19,9 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 from pimann.core.params import FiguresParams
-from pimann.evaluate.command_following import SPEED_TOLERANCE
+from pimann.core.rollout_files import BASELINE, HELD_OUT, weight_label
+from pimann.evaluate.command_following_measures import SPEED_TOLERANCE
 from pimann.evaluate.figure_style import BASELINE_COLOUR, weight_colours
-from pimann.generate.rollout_layout import BASELINE, HELD_OUT, weight_label
 from pimann.learn.motion_classes import CLASSES
 
 PLOTTED_CLASSES = tuple(c for c in CLASSES if c not in ("turning_in_place", "standing"))

@@ -1,6 +1,6 @@
 """The study's evaluation (Sec. IV): rollouts -> tidy metrics, seed statistics, figure data, claims.
 
-Reads the rollouts (layout: pimann.generate.rollout_layout) and writes under results/
+Reads the rollouts (layout: pimann.core.rollout_files) and writes under results/
 (`write_results`):
 metrics.csv (one row per rollout: every pimann.evaluate.metrics value), metrics_summary.json
 (median,
@@ -8,7 +8,7 @@ IQR, min, max over the seeds; the data's own level of the sliding metrics under
 "data_reference", pimann.evaluate.data_reference), timeseries/*.csv and claims.md
 (pimann.evaluate.claims),
 each with the profile and the params it came from; and the command-following benchmark
-(pimann.evaluate.following): command_following.csv, .md and .png.
+(pimann.evaluate.command_following_benchmark): command_following.csv, .md and .png.
 """
 
 from __future__ import annotations
@@ -29,13 +29,7 @@ from pimann.core.parallel import pool_map
 from pimann.core.params import EvaluateParams, Params, as_dict
 from pimann.core.paths import REPO_ROOT
 from pimann.core.progress import track
-from pimann.evaluate.claims import (
-    Claim,
-    claims_markdown,
-    evaluate_claims,
-)
-from pimann.evaluate.metrics import aggregate
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     ADHERENT,
     BASELINE,
     MODELS_FILE,
@@ -50,6 +44,12 @@ from pimann.generate.rollout_layout import (
     select_rows,
     weight_label,
 )
+from pimann.evaluate.claims import (
+    Claim,
+    claims_markdown,
+    evaluate_claims,
+)
+from pimann.evaluate.metrics import aggregate
 
 log = logging.getLogger(__name__)
 
@@ -297,12 +297,12 @@ def evaluate_all(
     data: str | Path | None = None,
 ) -> list[Claim]:
     """The whole evaluate stage: metrics, summary, time series, the data's level, claims, and
-    command following (pimann.evaluate.following, with the test clips' own level).
+    command following (pimann.evaluate.command_following_benchmark, with the test clips' own level).
 
     `data`: the retargeted collection the models learn from (default: features.input).
     """
+    from pimann.evaluate.command_following_benchmark import collect_following, write_following
     from pimann.evaluate.data_reference import data_reference
-    from pimann.evaluate.following import collect_following, write_following
 
     frame = collect_metrics(rollouts_dir, params, workers)
     selection = timeseries_selection(frame, params.evaluate)

@@ -52,15 +52,15 @@ from pimann.core.errors import PimannError
 from pimann.core.params import ContactParams, Params, Segment
 from pimann.core.paths import repo_relative
 from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
-from pimann.core.rotations import rot_z, rotation_rpy
-from pimann.core.trajectory import Trajectory, write_trajectory
-from pimann.generate.command_script import ScriptSteps
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     SCRIPT_ATTR,
     RolloutKey,
     rollout_path,
     script_json,
 )
+from pimann.core.rotations import rot_z, rotation_rpy
+from pimann.core.trajectory import Trajectory, write_trajectory
+from pimann.generate.command_script import ScriptSteps
 from pimann.generate.rollouts import rollout_scripts, write_seed_rollouts
 from pimann.learn.adherent import (
     AdherentLayout,

@@ -188,7 +188,7 @@ class BatchGenerator:
         y_{k-1} predicts); `state`: joints, joint velocities, base position and roll-pitch-yaw
         at k - 1 as the network sees them (its fed-back pose); `position`, `rotation`: the base
         pose at k - 1, `next_rotation`: at k; `phase` (B, 2 or 4): the gait phase's (cos, sin) at
-        k - 1, which a layout with the phase needs. pimann.learn.teacher_forcing and the oracle
+        k - 1, which a layout with the phase needs. diagnostics.teacher_forcing and the oracle
         test start rollouts of the data's own outputs this way.
         """
         rows, length = len(self.head), history.shape[1]

@@ -19,9 +19,7 @@ import numpy as np
 from pimann.core.errors import PimannError
 from pimann.core.params import Params
 from pimann.core.paths import REPO_ROOT
-from pimann.core.trajectory import Trajectory, iter_collection
-from pimann.generate.command_script import clip_commands
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     HELD_OUT,
     TRAINING,
     Segment,
@@ -29,6 +27,8 @@ from pimann.generate.rollout_layout import (
     scenario_names,
     train_scenario,
 )
+from pimann.core.trajectory import Trajectory, iter_collection
+from pimann.generate.command_script import clip_commands
 from pimann.learn.features import split_sources
 from pimann.learn.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 

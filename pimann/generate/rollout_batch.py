@@ -137,7 +137,7 @@ def generate_batch(
     `standing`: the pose to start from and return to (default: the robot's nominal one;
     generated files start from the model's, `generate_files`);
     `start_joint_velocities` (nj,): the joints' velocities at the start (default: at rest;
-    pimann.generate.mid_stride starts rollouts inside a clip's gait);
+    diagnostics.mid_stride starts rollouts inside a clip's gait);
     `timings`: seconds per section of the step (`SECTIONS`, "record") are added to it.
     """
     if not specs:
@@ -280,7 +280,7 @@ def _model_rollouts(
     Attributes as the files have always had them: scenario, model_dir, script, pi_weight,
     seed, variant, start_pose, steering.
     """
-    from pimann.generate.rollout_layout import SCRIPT_ATTR, script_json
+    from pimann.core.rollout_files import SCRIPT_ATTR, script_json
     from pimann.learn.model_files import META_FILE, load_model
 
     model, layout, stats, meta = load_model(model_dir)

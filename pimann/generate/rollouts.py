@@ -1,6 +1,6 @@
 """The rollout stage's runner: every seed of a training output x every command script, with
 and without steering, generated in batches and written in the layout of
-pimann.generate.rollout_layout.
+pimann.core.rollout_files.
 
 Beside the scripts, each of the authors' test protocols (`rollout.protocols`) under its own
 name, with and without steering, each way with the rollout keys it sets.
@@ -24,14 +24,14 @@ from pimann.core.atomic import atomic_path
 from pimann.core.errors import PimannError
 from pimann.core.parallel import pool_map
 from pimann.core.params import Params
-from pimann.generate.benchmark_clips import benchmark_scripts
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     MODELS_FILE,
     RolloutKey,
     Segment,
     rollout_path,
     scenario_names,
 )
+from pimann.generate.benchmark_clips import benchmark_scripts
 from pimann.learn.model_files import model_seeds
 
 log = logging.getLogger(__name__)

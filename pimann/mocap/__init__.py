@@ -1,7 +1,4 @@
-"""Human motion capture: readers (XSens YARP log, MVNX, BVH), resampling, mirroring.
-
-A package docstring only (under 60 lines).
-"""
+"""Human motion capture: readers (XSens YARP log, MVNX, BVH), resampling, mirroring."""
 
 from pimann.mocap.human_motion import HumanMotion
 from pimann.mocap.io import mocap_info, read_mocap

@@ -1,4 +1,2 @@
 """Pictures of trajectories: stick figures of the robot (and of the person beside it), drawn
-to .png strips, .gif and .mp4. Sits just above mocap, which the person's drawing reads.
-
-A package's summary only (hence so short): its modules hold the code."""
+to .png strips, .gif and .mp4. Sits just above mocap, which the person's drawing reads."""

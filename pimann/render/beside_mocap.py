@@ -1,7 +1,7 @@
 """`pimann render`'s file reading: a trajectory file drawn beside the mocap clip it came from.
 
 Apart from pimann.render.trajectory because it reads the mocap (pimann.mocap.io), which the
-simulation's videos must not import; hence under 60 lines.
+simulation's videos must not import.
 """
 
 from __future__ import annotations

@@ -25,6 +25,8 @@ from matplotlib.patches import Patch
 
 from pimann.core.params import EvaluateParams, FiguresParams
 from pimann.core.robot import JOINT_NAMES
+from pimann.core.rollout_files import paper_baseline, pi_models, weight_label
+from pimann.evaluate.evaluation_results import Results, load_results
 from pimann.evaluate.figure_style import (
     BASELINE_COLOUR,
     DATA_COLOUR,
@@ -34,8 +36,6 @@ from pimann.evaluate.figure_style import (
     weight_colours,
 )
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE
-from pimann.evaluate.results import Results, load_results
-from pimann.generate.rollout_layout import paper_baseline, pi_models, weight_label
 
 log = logging.getLogger(__name__)
 CONDITIONS = {  # drift figures: (title, colour, line style)

@@ -17,8 +17,8 @@ and stable from run to run (a value that cannot be had is null):
   (evaluate.pi_weight), unsteered and steered;
 - `data.sliding_*`: the retargeted data's own level of each sliding measure;
 - `following.<model>.<steering>`: the share of motion classes whose every criterion passes
-  (pimann.evaluate.command_following), on the held-out split, and `following.data` for the test
-  clips themselves;
+  (pimann.evaluate.command_following_measures), on the held-out split, and `following.data` for
+  the test clips themselves;
 - `sim.runs`, `sim.success_share`, `sim.fallen`: the MuJoCo runs.
 """
 
@@ -33,14 +33,7 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.params import Params
-from pimann.evaluate.claims import (
-    FAILS,
-    HOLDS,
-    NOT_COMPARABLE,
-    STANDS_STILL,
-    WITHIN_SPREAD,
-)
-from pimann.generate.rollout_layout import (
+from pimann.core.rollout_files import (
     ADHERENT,
     BASELINE,
     HELD_OUT,
@@ -49,6 +42,13 @@ from pimann.generate.rollout_layout import (
     pi_models,
     select_rows,
     weight_label,
+)
+from pimann.evaluate.claims import (
+    FAILS,
+    HOLDS,
+    NOT_COMPARABLE,
+    STANDS_STILL,
+    WITHIN_SPREAD,
 )
 
 METRICS_FILE = "metrics.json"
@@ -133,8 +133,8 @@ def following_metrics(rows: pd.DataFrame | None) -> dict[str, Number]:
     """The share of motion classes passing every criterion, per model and steering."""
     if rows is None or rows.empty:
         return {}
-    from pimann.evaluate.command_following import summarise_following
-    from pimann.evaluate.following import DATA_MODEL
+    from pimann.evaluate.command_following_benchmark import DATA_MODEL
+    from pimann.evaluate.command_following_measures import summarise_following
 
     if "split" in rows:  # the held-out split: the benchmark's meaning
         rows = rows[rows["split"] == HELD_OUT]
@@ -164,7 +164,7 @@ def sim_metrics(sim_summary: dict[str, Any] | None) -> dict[str, Number]:
 def key_metrics(results_dir: str | Path, params: Params) -> dict[str, Number]:
     """Every key number of module docstring from the files under `results_dir` (the parts
     whose file is missing are left out)."""
-    from pimann.evaluate.results import read_metrics
+    from pimann.evaluate.evaluation_results import read_metrics
 
     root = Path(results_dir)
     frame = read_metrics(root / "metrics.csv")

@@ -7,12 +7,11 @@ com_reference: the generated CoM mapped onto the footstep plan, which the DCM pl
 centroidal_mpc: the online controller's centroidal MPC with step adjustment (casadi).
 online: the MPC replanned in the closed loop: CoM, ZMP and adjusted footsteps for the IK.
 wbc: whole-body QP IK (pink + daqp) and the ZMP-CoM feedback law.
-run: the closed loop, `simulate_trajectory(trajectory, params, controller=...)`.
+closed_loop: the closed loop, `simulate_trajectory(trajectory, params, controller=...)`.
 synthetic: a kinematic stepping trajectory for tests and benchmarks.
-results: a run written to (and read from) HDF5, the ZMP-outside-the-support figure.
+simulation_files: a run written to (and read from) HDF5, the ZMP-outside-the-support figure.
+run_list: the simulate stage's runs and push studies, one result file each, and their summary.
 video: offscreen MuJoCo rendering of a run (stick-figure fallback without OpenGL).
-
-Under 60 lines: a package docstring and the headless GL backend choice.
 """
 
 import os

@@ -4,7 +4,7 @@ Between solves the centroidal dynamics are integrated with the first knot's forc
 over the period: the CoM's acceleration is g + sum f / m), which gives the whole-body layer
 its CoM and CoM velocity; the desired ZMP is those forces' centre of pressure. The MPC's
 adjusted footsteps are written into the footstep plan the swing planner reads, so the IK and
-the feedback are the offline controller's (`pimann.sim.run.simulate_plan`).
+the feedback are the offline controller's (`pimann.sim.closed_loop.simulate_plan`).
 """
 
 from __future__ import annotations

@@ -22,9 +22,9 @@ from pimann.core.params import SimulateParams
 from pimann.core.robot import load_robot
 from pimann.core.rotations import rot_z
 from pimann.core.trajectory import Trajectory
+from pimann.sim.closed_loop import simulate_trajectory
 from pimann.sim.footsteps import FootstepPlan, extract_footsteps
 from pimann.sim.online import Push
-from pimann.sim.run import simulate_trajectory
 from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import standing_pose
 

@@ -21,7 +21,7 @@ from pimann.core.errors import PimannError
 from pimann.core.params import SimulateParams
 from pimann.core.robot import JOINT_NAMES, SOLE_HALF_LENGTH, SOLE_HALF_WIDTH
 from pimann.core.trajectory import Trajectory, write_trajectory
-from pimann.sim.run import SimulationResult
+from pimann.sim.closed_loop import SimulationResult
 
 CONTACT_FORCE_N = 20.0  # N of normal force for a foot to count as in contact
 TRACES = (

@@ -1,6 +1,6 @@
 """The simulate stage's work: chosen rollouts walked in MuJoCo, one result file each, a summary.
 
-results/sim/<model>-<seed>-<scenario>-<steering|nosteering>[-online].h5   (pimann.sim.results)
+results/sim/<model>-<seed>-<scenario>-<steering|nosteering>[-online].h5   (simulation_files)
 results/sim/<same name>.mp4                                       (runs marked `video`)
 results/sim/pushes.png                                            (simulate.pushes, if any)
 summary JSON: per run the summary figures, per push study the largest push survived per
@@ -20,11 +20,11 @@ from pimann.core.errors import PimannError, about
 from pimann.core.params import Params, SimulateRun, as_dict
 from pimann.core.paths import repo_relative
 from pimann.core.progress import track
+from pimann.core.rollout_files import STEERING_LABEL, RolloutKey, rollout_path
 from pimann.core.trajectory import read_trajectory
-from pimann.generate.rollout_layout import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.sim.closed_loop import simulate_trajectory
 from pimann.sim.pushes import plot_push_recovery, push_records, push_recovery
-from pimann.sim.results import write_simulation
-from pimann.sim.run import simulate_trajectory
+from pimann.sim.simulation_files import write_simulation
 from pimann.sim.video import render_simulation
 
 log = logging.getLogger(__name__)

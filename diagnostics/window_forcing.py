@@ -16,7 +16,7 @@ per foot per 10 s beside the clip's, and the leg joints' RMSE. A model whose leg
 the data's windows but stall free fails in the base motion it generates; one that stalls under
 both fails in its legs. Run after `dvc repro` (it reads models/ and data/retargeted):
 
-    python -m pimann.generate.window_forcing [--models models] [--seconds 8]
+    python -m diagnostics.window_forcing [--models models] [--seconds 8]
 """
 
 from __future__ import annotations
@@ -31,21 +31,21 @@ import pandas as pd
 import torch
 from scipy.spatial.transform import Rotation
 
+from diagnostics.mid_stride import ratio_along
+from diagnostics.teacher_forcing import add_models_argument, table_over_models
 from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import LEG_JOINTS as LEGS
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory
 from pimann.generate.batch_generator import BatchGenerator, data_start
 from pimann.generate.benchmark_clips import held_out_clips, training_clips
 from pimann.generate.command_script import ScriptSteps
-from pimann.generate.mid_stride import ratio_along
 from pimann.learn.features import clip_features
 from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import base_motion, class_counts, majority_class
 from pimann.learn.standing import StandingPose
-from pimann.learn.teacher_forcing import LEG_JOINTS as LEGS
-from pimann.learn.teacher_forcing import add_models_argument, table_over_models
 
 MODES = ("free", "windows")
 

@@ -15,7 +15,7 @@ from typing import Any
 import pandas as pd
 
 from pimann.core.errors import PimannError
-from pimann.generate.rollout_layout import pi_models
+from pimann.core.rollout_files import pi_models
 
 KEY_COLUMNS = ["model", "variant", "pi_weight", "seed", "scenario", "steering"]
 

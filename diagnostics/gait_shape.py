@@ -20,7 +20,7 @@ on the sole origins, as the position-level sliding counts them):
 - `swing_peak_height`: the median peak height of a sole origin over its swings (runs out of
   contact inside the clip, m): a low swing spends more of its travel near the floor.
 
-`python -m pimann.evaluate.gait_shape results/rollouts/w10 [...] --class forward` prints the
+`python -m diagnostics.gait_shape results/rollouts/w10 [...] --class forward` prints the
 medians over the steered (`--unsteered`: unsteered) rollouts of the benchmark clips whose
 majority class is the one asked, in a split, every seed, beside the data's clips themselves.
 """
@@ -37,14 +37,13 @@ import pandas as pd
 from pimann.core.contacts import true_runs
 from pimann.core.params import Params, load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.core.robot import Robot, load_robot
+from pimann.core.robot import LEG_JOINTS, Robot, load_robot
+from pimann.core.rollout_files import HELD_OUT, find_rollouts
 from pimann.core.rotations import quaternion_xyzw_matrices, tilt_of, yaw_of
 from pimann.core.trajectory import Trajectory, read_trajectory
 from pimann.evaluate.metrics import analyse
 from pimann.generate.benchmark_clips import benchmark_clips
-from pimann.generate.rollout_layout import HELD_OUT, find_rollouts
 from pimann.learn.motion_classes import class_counts, majority_class
-from pimann.learn.teacher_forcing import LEG_JOINTS
 
 HIGH_BAND_HZ = (6.0, 15.0)
 COLUMNS = [

@@ -6,7 +6,7 @@ legs' joint steps s_i - s_{i-1}. Where it does and a rollout still fails,
 the rollout loop is the cause (how it starts, what it feeds back); where it does not, the
 training is. Run after `dvc repro` (it reads models/ and data/features):
 
-    python -m pimann.learn.teacher_forcing [--models models] [--samples 20000]
+    python -m diagnostics.teacher_forcing [--models models] [--samples 20000]
 
 prints, per model seed and motion class (pimann.learn.motion_classes of the sample's frame), the
 mean true and predicted forward and lateral base velocity and the least-squares slope of the
@@ -39,7 +39,7 @@ import torch
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
 from pimann.core.paths import REPO_ROOT
-from pimann.core.robot import JOINT_NAMES
+from pimann.core.robot import LEG_JOINTS
 from pimann.core.trajectory import iter_collection
 from pimann.learn.dataset import read_dataset
 from pimann.learn.features import REVERSED_SUFFIX, time_reversed
@@ -49,9 +49,6 @@ from pimann.learn.training_loss import TrainingLoss
 
 # the next frame's base velocity (y_i's window is of frame i + 1: not an input column)
 OUTPUTS = ("base_linear_future[0].x", "base_linear_future[0].y")
-LEG_JOINTS = [
-    k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))
-]
 
 
 def sample_classes(collection: Path, clips: list[str], origin: np.ndarray) -> np.ndarray:

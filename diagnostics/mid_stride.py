@@ -1,6 +1,6 @@
 """Gait sustainment: does a trained model keep walking in a gait it is started in?
 
-Teacher forcing (pimann.learn.teacher_forcing) feeds a model the data's inputs at every step; a
+Teacher forcing (diagnostics.teacher_forcing) feeds a model the data's inputs at every step; a
 rollout feeds it its own from a standing start. This sits between the two: each held-out
 clip's state at its middle frame (joints, joint velocities, base roll and pitch) starts a
 rollout (unsteered; `--steering`: steered) under the clip's own base motion there, held as
@@ -9,7 +9,7 @@ from both is fine; one that walks from mid-stride only fails to start; one that 
 neither cannot sustain the gait, however it starts. Run after `dvc repro` (it reads models/
 and data/retargeted):
 
-    python -m pimann.generate.mid_stride [--models models] [--seconds 10] [--steering]
+    python -m diagnostics.mid_stride [--models models] [--seconds 10] [--steering]
 
 prints per model, seed and motion class (the clip's at its middle frame): the commanded
 speed, and from each start the ratio of the speed the legs achieve (leg odometry, along the
@@ -33,17 +33,17 @@ import numpy as np
 import pandas as pd
 from scipy.spatial.transform import Rotation
 
+from diagnostics.teacher_forcing import add_models_argument, table_over_models
 from pimann.core.contacts import touchdowns
 from pimann.core.params import MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
+from pimann.core.robot import LEG_JOINTS as LEGS
 from pimann.core.rotations import roll_pitch, to_heading_frame, yaw_of
 from pimann.core.trajectory import Trajectory
 from pimann.generate.benchmark_clips import held_out_clips
 from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import CLASSES, base_motion, classify
 from pimann.learn.standing import StandingPose
-from pimann.learn.teacher_forcing import LEG_JOINTS as LEGS
-from pimann.learn.teacher_forcing import add_models_argument, table_over_models
 
 if TYPE_CHECKING:
     from pimann.generate.rollout_batch import Rollout

@@ -16,8 +16,9 @@ in its attrs["script"] (JSON, `script_json`; `read_script` reads it back). The h
 end name the models of a table keyed like the layout (model, pi_weight, seed, scenario,
 steering), as the evaluation's metrics.csv is.
 
-Apart from the runner (pimann.generate.rollouts): the simulation, the evaluation and the figures
-read the layout from here without depending on the generator or the training code.
+Apart from the runner (pimann.generate.rollouts), in pimann.core: the generation, the simulation,
+the evaluation and the figures read the layout from the lowest floor, without depending on the
+generator or the training code.
 """
 
 from __future__ import annotations
