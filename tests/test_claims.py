@@ -104,7 +104,9 @@ def test_the_adherent_model_is_the_baseline_where_trained(params):
     frame = crafted_metrics()
     adherent = frame[frame["model"] == BASELINE].assign(model="adherent")
     adherent["support_rmse_paper_linear_total"] = 4.0  # slides less than every PI model
-    claims = {c.id: c for c in evaluate_claims(pd.concat([frame, adherent]), params.evaluate, "both")}
+    claims = {
+        c.id: c for c in evaluate_claims(pd.concat([frame, adherent]), params.evaluate, "both")
+    }
     assert (
         claims["C1"].ours.startswith("adherent: ") and "yaw-only variant: 20" in claims["C1"].ours
     )
@@ -230,9 +232,13 @@ def test_c5_names_a_reduction_that_comes_without_the_physics_term(params):
     reduction is not the physics term's; with w=0 above the baseline it says nothing of it."""
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["support_rmse_paper_linear_total"].update(w0=6, w1=8, w10=10)  # grows with w
-    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"]
+    c5 = [
+        c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"
+    ]
     assert c5[0].status == FAILS
     assert "w=0, trained without L_B, already slides below baseline (6 / 6" in c5[0].reason
     values["support_rmse_paper_linear_total"].update(w0=30)  # above the baseline's 20
-    c5 = [c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"]
+    c5 = [
+        c for c in evaluate_claims(crafted_metrics(values), params.evaluate, "both") if c.id == "C5"
+    ]
     assert "without L_B" not in c5[0].reason

@@ -283,7 +283,7 @@ class RolloutParams:
     benchmark_clips: Bool
     # ... and this many training clips' per motion class (in-distribution level); 0: none
     benchmark_train_clips: NonNegativeInt
-    # the authors' test protocols, rolled out as scenarios of their own name (pimann.core.rollout_files)
+    # the authors' test protocols, rolled out as scenarios of their own name (rollout_files)
     protocols: dict[Str, ProtocolParams]
 
     @model_validator(mode="after")
