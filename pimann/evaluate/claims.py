@@ -298,9 +298,7 @@ def _header_provenance(provenance: dict[str, Any]) -> dict[str, Any]:
     return {k: provenance.get(k) for k in ("profile", "epochs", "clips", "max_takes", "seeds")}
 
 
-def evaluate_claims(
-    frame: pd.DataFrame, evaluate: EvaluateParams, pi_gradient: str
-) -> list[Claim]:
+def evaluate_claims(frame: pd.DataFrame, evaluate: EvaluateParams, pi_gradient: str) -> list[Claim]:
     """Each claim of the paper's Sec. IV against our metrics, by the `RULES`.
 
     `evaluate`: on evaluate.scenario, the featured PI model evaluate.pi_weight (drift and
