@@ -62,7 +62,7 @@ def step_seconds(
     stats = Normalisation.fit(
         rng.normal(size=(1000, layout.input_dim)), rng.normal(size=(1000, layout.output_dim)) * 0.1
     )
-    loss_fn = TrainingLoss(layout, stats, "predicted", device)
+    loss_fn = TrainingLoss.from_params(params.train, layout, stats, device)
     batch = params.train.batch_size
     model = MANN.from_seeds(layout.input_dim, layout.output_dim, params.model, SEEDS[:members])
     model.to(device).train()

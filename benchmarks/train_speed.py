@@ -54,7 +54,7 @@ def main(argv: list[str] | None = None) -> int:
     rng = np.random.default_rng(0)
     raw_y = rng.normal(size=(1000, layout.output_dim)) * 0.1
     stats = Normalisation.fit(rng.normal(size=(1000, layout.input_dim)), raw_y)
-    loss_fn = TrainingLoss(layout, stats, "predicted", device)
+    loss_fn = TrainingLoss.from_params(params.train, layout, stats, device)
     batch = params.train.batch_size
     seeds = list(range(args.members))
     x = torch.randn(args.members, batch, layout.input_dim, device=device)

@@ -7,10 +7,6 @@ the PI step in bfloat16 (train.precision: the products under autocast, the losse
 beside it with the bf16/float32 time ratio, and projected wall time of one full-size model
 and of the 26-model sweep on this machine in both precisions.
 
-Then the cost of train.rollout_states: one refresh of every member's own-rollout inputs
-(pimann.learn.rollout_states, once an epoch, 50-frame pieces) against one epoch of PI steps on as
-many samples, 1 model, batch 32.
-
 Then, on the whole machine, the 5 seeds of one weight at batch 32 with the PI term: one
 process with every core's thread against `train.workers` single-threaded processes (what the
 `train` stage does), wall-clock throughput, and the projected cost of the paper-size study.
@@ -18,7 +14,7 @@ process with every core's thread against `train.workers` single-threaded process
     python -m benchmarks.train_step [--seconds 4] [--device cpu] [--threads 1] [--smoke]
 
 `--smoke`: every part with tiny sizes (a MANN of 32 hidden units, 0.05 timed seconds per case,
-a 1000-row refresh, the workers' clocks 1 s after the start), to check that it still runs.
+the workers' clocks 1 s after the start), to check that it still runs.
 """
 
 from __future__ import annotations
@@ -29,16 +25,13 @@ import os
 import sys
 import time
 
-import numpy as np
 import torch
 
 from pimann.core.parallel import pool_map
 from pimann.core.params import load_params
 from pimann.core.robot import load_robot
-from pimann.learn.feature_layout import Normalisation, window_layout
 from pimann.learn.mann import MANN
 from pimann.learn.physics_loss import PhysicsInformedLoss
-from pimann.learn.rollout_states import OwnRollouts
 from pimann.learn.train import autocast, cpu_has_bf16, seed_groups
 
 INPUT_DIM, OUTPUT_DIM = 130, 100
@@ -122,29 +115,6 @@ def throughputs(steps, ensemble, batch, seconds, device) -> list[float]:
                 torch.cuda.synchronize()
             best[i] = max(best[i], count * batch * ensemble / (clock() - start))
     return best
-
-
-def refresh_rate(device: torch.device, rows: int = 20_000, smoke: bool = False) -> float:
-    """Rows per second (CPU time on the CPU) of one own-rollout refresh, 1 model, the study's
-    layout, clips of 500 frames (`smoke`: the tiny model)."""
-    params = dataclasses.replace(load_params(), model=model_params(smoke))
-    layout = window_layout(params.features, 50.0, "full")
-    n_in, n_out = layout.input_dim, layout.output_dim
-    identity = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
-    origin = np.stack([np.arange(rows) // 500, np.arange(rows) % 500], axis=1)
-    rollouts = OwnRollouts(layout, identity, origin, 50, device, 1.0)
-    generator = torch.Generator().manual_seed(2)
-    x = torch.randn(rows, layout.input_dim, generator=generator).to(device)
-    y = torch.randn(rows, layout.output_dim, generator=generator).to(device)
-    torch.manual_seed(0)
-    model = MANN(layout.input_dim, layout.output_dim, params.model).to(device)
-    rollouts.inputs(model, x, y)  # warm-up
-    clock = time.perf_counter if device.type == "cuda" else time.process_time
-    start = clock()
-    rollouts.inputs(model, x, y)
-    if device.type == "cuda":
-        torch.cuda.synchronize()
-    return rows / (clock() - start)
 
 
 def _ensemble_rate(job: tuple[list[int], int, float, float, bool]) -> float:
@@ -238,11 +208,6 @@ def main(argv: list[str] | None = None) -> int:
     print(
         f"  time over pi_dropout true: two passes {same / two_pass:.2f}x, "
         f"one doubled pass {same / fused:.2f}x (two/one {fused / two_pass:.2f}x)"
-    )
-    refresh = refresh_rate(device, 1000 if args.smoke else 20_000, args.smoke)
-    print(
-        f"own-rollout refresh (train.rollout_states): {refresh:.0f} rows/s, "
-        f"{rates[1, 32][1] / refresh:.2f}x an epoch of PI steps on as many samples"
     )
     model_epochs = EPOCHS * SAMPLES
     single = model_epochs / rates[1, 32][1] / 3600

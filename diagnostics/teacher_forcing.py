@@ -167,7 +167,8 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                 for split, (_, _, origin, _) in parts.items()
             }
             # the data's own leg shares, once per dataset: its stats are the models' own
-            loss = TrainingLoss(dataset.layout, dataset.stats, "predicted", torch.device("cpu"))
+            loss = TrainingLoss(dataset.layout, dataset.stats, torch.device("cpu"),
+                                pi_configuration="predicted", pi_gradient="both")  # fmt: skip
             leg_truths = {
                 split: contact_leg_velocity(loss, y, contacts)
                 for split, (_, y, _, contacts) in parts.items()

@@ -46,7 +46,6 @@ from pimann.generate.rollout_batch import (
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
-from pimann.learn.train import train_models
 
 # The repository's evaluation settings, spelled out so the tests do not move with params.yaml.
 CONTACT_PARAMS = ContactParams(on_height=0.02, off_height=0.02, switch_time=0.04)
@@ -407,21 +406,6 @@ def break_model(folder: Path, kind: str) -> tuple[Path, str]:
     name, breaker, message = BROKEN_MODELS[kind]
     breaker(folder)
     return folder / name, message
-
-
-def trains_differently_and_deterministically(tmp_path, params, dataset_path, pi_weight, **change):
-    """Training with `change` to params.train twice gives the same weights, and not those of
-    training without it (every switch of this kind off)."""
-    plain = dataclasses.replace(params.train, input_noise=0.0, rollout_states=0.0)
-    changed = dataclasses.replace(plain, **change)
-    for name, train in (("plain", plain), ("changed", changed), ("changed_again", changed)):
-        run = dataclasses.replace(params, train=train)
-        train_models(dataset_path, tmp_path / name, pi_weight, [0], run, "cpu")
-    a, b = _weights(tmp_path / "changed" / "0"), _weights(tmp_path / "changed_again" / "0")
-    assert torch.equal(a["expert_weight_2"], b["expert_weight_2"])
-    assert not torch.equal(
-        a["expert_weight_2"], _weights(tmp_path / "plain" / "0")["expert_weight_2"]
-    )
 
 
 def crafted_rows() -> pd.DataFrame:

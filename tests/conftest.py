@@ -1,5 +1,5 @@
 """Shared fixtures: the real ergoCub model from the shared folder, seeded generators, and the
-small training's params and dataset (test_train, test_rollout_states)."""
+small training's params and dataset (test_train, test_sweep)."""
 
 from __future__ import annotations
 
@@ -75,7 +75,7 @@ def real_walks():
 
 @pytest.fixture(scope="module")
 def params():
-    """The small training's params (test_train, test_rollout_states) on the paper's layout (130
+    """The small training's params (test_train, test_sweep) on the paper's layout (130
     inputs, 100 outputs: no gait phase, the sizes these tests name); a test module's own
     `params` fixture overrides this one."""
     base = load_params()

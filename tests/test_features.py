@@ -74,33 +74,6 @@ def test_the_gait_phase_adds_two_fed_back_columns_after_the_pose(params):
         clip_features(dataclasses.replace(clip, contacts=None), phased)
 
 
-def test_a_phase_per_foot_is_four_columns_read_back_and_written_only_when_on(params):
-    stride = dataclasses.replace(params.features, gait_phase=True, gait_phase_step_s=0.8)
-    phased = window_layout(stride, RATE, "full")
-    feet = window_layout(dataclasses.replace(stride, gait_phase_per_foot=True), RATE, "full")
-    assert feet.input_dim == phased.input_dim + 2 and feet.output_dim == phased.output_dim + 2
-    assert feet.names("y")[-4:] == [
-        f"gait_phase.{foot}.{part}" for foot in ("left", "right") for part in ("cos", "sin")
-    ]
-    assert feet.fed_back_columns()[-4:].all()
-    assert FeatureLayout.from_json(feet.to_json()) == feet
-    assert "per_foot" not in phased.to_json()  # model files without it read as before
-    with pytest.raises(PimannError, match="gait_phase_per_foot"):
-        FeatureLayout.from_json(feet.to_json().replace("true", '"yes"'))
-    # without a phase the switch adds nothing
-    none = dataclasses.replace(stride, gait_phase=False, gait_phase_per_foot=True)
-    assert not window_layout(none, RATE, "full").gait_phase_per_foot
-    # the features: each foot's (cos, sin) pair on the unit circle, (1, 0) at its touchdowns
-    clip = synthetic_clip()
-    x, y, steps = clip_features(clip, feet)
-    pairs = y[:, feet.y_slices["gait_phase"]].reshape(len(y), 2, 2)
-    assert np.allclose(np.linalg.norm(pairs, axis=2), 1.0)
-    down = np.asarray(clip.contacts, bool)
-    touchdowns = np.flatnonzero(~down[:-1, 0] & down[1:, 0]) + 1
-    at = [np.flatnonzero(steps == t)[0] for t in touchdowns if t in steps]
-    assert at and np.allclose(pairs[at, 0], [1.0, 0.0])
-
-
 def test_constant_velocity_features_match_closed_form(params):
     velocity, yaw_rate = np.array([0.4, 0.1, 0.02]), 1.0
     clip = synthetic_clip(300, velocity, yaw_rate)
@@ -303,7 +276,7 @@ def test_normalisation_uses_training_statistics_only(params, tmp_path):
     np.testing.assert_array_equal(back.x_test, dataset.x_test)
     np.testing.assert_array_equal(back.stats.y_std, dataset.stats.y_std)
     assert N_JOINTS == back.layout.n_joints
-    # each sample carries its clip's settled contact flags at its step (pi_support data_contacts)
+    # each sample carries its clip's settled contact flags at its step
     clip_of = dict(clips)
     margin = round(params.features.contact_margin_s * RATE)
     assert margin == 2

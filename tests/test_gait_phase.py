@@ -7,7 +7,6 @@ import pytest
 
 from pimann.core.errors import PimannError
 from pimann.learn.gait_phase import (
-    foot_phases,
     gait_phase,
     phase_vector,
     touchdown_frames,
@@ -76,35 +75,6 @@ def test_phase_vectors_are_unit_and_a_prediction_is_put_back_on_the_circle():
     assert np.allclose(np.arctan2(vector[:, 1], vector[:, 0]), np.angle(np.exp(1j * phase)))
     assert np.allclose(unit_phase(2.5 * vector), vector)
     assert unit_phase(np.zeros((1, 2))).tolist() == [[1.0, 0.0]]
-
-
-def test_each_foot_has_its_own_phase_zero_at_touchdown_and_pi_at_lift_off():
-    # left down over [10, 45) and [60, 95), right over [0, 20), [35, 70) and [85, 100)
-    contacts = flags(100, [(10, 45), (60, 95)], [(0, 20), (35, 70), (85, 100)])
-    phases = foot_phases(contacts, RATE, step_s=0.8)
-    left, right = phases[:, 0], phases[:, 1]
-    # left: touchdown 10 (0), lift-off 45 (pi), touchdown 60 (2 pi), lift-off 95 (3 pi)
-    assert left[[10, 45, 60, 95]] == pytest.approx([0.0, np.pi, 2 * np.pi, 3 * np.pi])
-    assert left[30] == pytest.approx(np.pi * 20 / 35)  # linear through the stance
-    assert left[50] == pytest.approx(np.pi + np.pi * 5 / 15)  # and through the swing
-    # right starts down: its first event is a lift-off (pi), then touchdown 35 (2 pi) ...
-    assert right[[20, 35, 70, 85]] == pytest.approx([np.pi, 2 * np.pi, 3 * np.pi, 4 * np.pi])
-    assert np.all(np.diff(phases, axis=0) >= 0)
-    # before its first event each phase runs up half a turn over step_s (40 frames)
-    assert right[0] == pytest.approx(np.pi - np.pi * 20 / 40)
-    assert np.all(left[96:] == left[95])
-
-
-def test_a_foot_that_stands_holds_its_phase_and_one_that_never_moves_is_zero():
-    # the left stands 2 s between a touchdown at 10 and a lift-off at 110; the right never moves
-    contacts = flags(160, [(10, 110), (130, 160)], [(0, 160)])
-    phases = foot_phases(contacts, RATE, step_s=0.5)  # 25 frames
-    assert np.all(phases[10:86, 0] == 0.0)  # waits until step_s before the lift-off
-    assert phases[98, 0] == pytest.approx(np.pi * (98 - 85) / 25)
-    assert phases[110, 0] == pytest.approx(np.pi) and phases[130, 0] == pytest.approx(2 * np.pi)
-    assert np.all(phases[:, 1] == 0.0)
-    with pytest.raises(PimannError, match=r"\(T, 2\)"):
-        foot_phases(np.ones((30, 1), bool), RATE, 0.8)
 
 
 def test_several_predicted_phases_are_each_put_back_on_their_circle():

@@ -23,6 +23,7 @@ from pimann.core.params import ModelParams, MotionSegment, StandSegment, load_pa
 from pimann.core.robot import JOINT_NAMES, STANDING_JOINTS
 from pimann.core.rotations import matrix_to_rpy, yaw_of
 from pimann.core.trajectory import read_trajectory
+from pimann.generate.future_window import interpolation
 from pimann.generate.rollout_batch import (
     generate,
     generate_file,
@@ -31,7 +32,6 @@ from pimann.generate.rollout_batch import (
 )
 from pimann.learn.feature_layout import Normalisation
 from pimann.learn.features import clip_features
-from pimann.learn.future_window import interpolation
 from pimann.learn.mann import MANN
 
 FORWARD = [MotionSegment(10.0, 0.5, 0.0, 0.0)]

@@ -25,17 +25,14 @@ PARAMS = load_params()
 VARIANTS = ("full", "ground_projected")
 
 
-def layout_of(variant: str, gait_phase: bool | str = False):
-    """`gait_phase`: False (none), True (the stride's) or "feet" (one per foot)."""
+def layout_of(variant: str, gait_phase: bool = False):
+    """`gait_phase`: False (none) or True (the stride's)."""
     layout = window_layout(PARAMS.features, 50.0, variant)
-    return dataclasses.replace(
-        layout, gait_phase_step_s=0.8 if gait_phase else None,
-        gait_phase_per_foot=gait_phase == "feet",
-    )  # fmt: skip
+    return dataclasses.replace(layout, gait_phase_step_s=0.8 if gait_phase else None)
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True), ("full", "feet")])  # fmt: skip
+                                                     ("full", True)])  # fmt: skip
 def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase):
     """Every output column that varies differs from every input column somewhere; the joints
     and their velocities are first differences (s_i = s_{i-1} + dt sdot_i exactly), and y_i's
@@ -56,7 +53,7 @@ def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase
         if gait_phase:
             assert np.abs(x[1:, xs["gait_phase"]] - y[:-1, ys["gait_phase"]]).max() == 0.0
             pairs = y[:, ys["gait_phase"]].reshape(len(y), -1, 2)
-            assert pairs.shape[1] == (2 if gait_phase == "feet" else 1)
+            assert pairs.shape[1] == 1
             assert np.allclose(np.linalg.norm(pairs, axis=2), 1.0)
         # the next input's window at the output offsets is this output's
         inputs = list(layout.input_offsets)
@@ -123,7 +120,7 @@ def clip_rotations(clip, variant):
 
 
 @pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True), ("full", "feet")])  # fmt: skip
+                                                     ("full", True)])  # fmt: skip
 @pytest.mark.parametrize("batched", [False, True])
 def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(
     robot, real_walks, variant, gait_phase, batched

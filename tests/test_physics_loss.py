@@ -80,34 +80,6 @@ def test_data_contacts_choose_the_feet(robot, loss, rng):
     assert (none == 0).all()
 
 
-@pytest.mark.parametrize("height", [0.02, 0.3])
-def test_near_ground_weights_each_foot_by_its_height(robot, rng, height):
-    """train.pi_support near_ground: each foot's residual weighted by
-    sigmoid((h - gap) 4 / h), the gap its height above the lower sole (pinocchio's here)."""
-    near = PhysicsInformedLoss(robot, dtype=torch.float64, near_ground=height)
-    plain = PhysicsInformedLoss(robot, dtype=torch.float64)
-    rows = still_foot_states(robot, rng, 16)
-    position, rpy, joints, twist, joint_velocities = (
-        torch.tensor(np.stack([r[i] for r in rows])) for i in range(5)
-    )
-    args = (position, rpy, joints, twist[:, :3], twist[:, 3:], joint_velocities)
-    left = torch.tensor([r[5] == LEFT_SOLE for r in rows])
-    lower = plain(*args)
-    other = plain(*args, support=torch.stack((~left, left), -1))
-    gaps = []
-    for p, angles, values in zip(position.numpy(), rpy.numpy(), joints.numpy(), strict=True):
-        q = robot.configuration(p, pin.Quaternion(pin.rpy.rpyToMatrix(angles)).coeffs(), values)
-        z = [robot.frame_placement(q, f).translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)]
-        gaps.append(abs(z[0] - z[1]))
-    weight = torch.sigmoid((height - torch.tensor(gaps)) * 4 / height)
-    lower_weight = torch.sigmoid(torch.tensor(4.0, dtype=torch.float64))
-    expected = (lower_weight * lower + weight * other) / (lower_weight + weight)
-    torch.testing.assert_close(near(*args), expected)
-    assert (other > 1e-4).all()  # the other foot moves: its weight shows
-    if height == 0.3:  # random poses: gaps of centimetres to decimetres, weights between
-        assert weight.min() < 0.1 and weight.max() > 0.5
-
-
 def test_loss_grows_with_foot_sliding(robot, loss, rng):
     """Sliding the support sole at speed u makes the base twist off by (J^B)^-1 u."""
     rows = still_foot_states(robot, rng, 4)

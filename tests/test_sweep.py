@@ -106,10 +106,6 @@ def test_the_stages_write_each_weight_out_of_one_sweep(tmp_path, sweep_params, d
 
 
 def test_what_the_sweep_cannot_do_is_refused(tmp_path, sweep_params, dataset_path):
-    noisy_train = dataclasses.replace(sweep_params.train, input_noise=0.1)
-    noisy = dataclasses.replace(sweep_params, train=noisy_train)
-    with pytest.raises(PimannError, match="input_noise"):
-        train_sweep(dataset_path, WEIGHTS, SEEDS, noisy, "cpu")
     with pytest.raises(PimannError, match="distinct"):
         train_sweep(dataset_path, [1.0, 1.0], SEEDS, sweep_params, "cpu")
     with pytest.raises(PimannError, match="not in the sweep"):

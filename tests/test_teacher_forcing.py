@@ -84,7 +84,9 @@ def test_contact_leg_velocity_is_pinocchios_sole_velocity_with_the_base_held(rob
     layout, stats = dataset.layout, dataset.stats
     y = dataset.y_train[:6]
     contacts = np.array([[1, 0], [0, 1], [1, 1], [0, 0], [1, 0], [0, 1]], bool)
-    loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
+    loss = TrainingLoss(
+        layout, stats, torch.device("cpu"), pi_configuration="predicted", pi_gradient="both"
+    )
     share = contact_leg_velocity(loss, y, contacts)
     assert np.isnan(share[[2, 3]]).all()
     assert np.isnan(contact_leg_velocity(loss, y, None)).all()
@@ -113,7 +115,9 @@ def test_feet_motion_moves_with_the_leg_joints_only(real_walks):
     x, y, _ = clip_features(real_walks["walk"], layout)
     stats = Normalisation(x.mean(0), x.std(0) + 1.0, y.mean(0), y.std(0) + 1.0)
     xn, yn = (x - stats.x_mean) / stats.x_std, (y - stats.y_mean) / stats.y_std
-    loss = TrainingLoss(layout, stats, "predicted", torch.device("cpu"))
+    loss = TrainingLoss(
+        layout, stats, torch.device("cpu"), pi_configuration="predicted", pi_gradient="both"
+    )
     height = params.contacts.on_height
     data = feet_motion(loss, layout, stats, xn, yn, yn, height)
     assert data.shape == (len(y),) and (data >= 0).all() and data.mean() > 0

@@ -18,12 +18,10 @@ from builders import (
     break_features,
     break_model,
     save_small_model,
-    trains_differently_and_deterministically,
 )
 
 from pimann.core.errors import PimannError
-from pimann.learn.dataset import write_dataset
-from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
+from pimann.learn.epochs import epoch_order, epoch_seed, schedule_factor
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import load_model
 from pimann.learn.train import train_models
@@ -38,11 +36,9 @@ def test_schedule_and_order():
     assert np.array_equal(epoch_order(3, 2, 50), epoch_order(3, 2, 50))
     assert not np.array_equal(epoch_order(3, 2, 50), epoch_order(4, 2, 50))
     assert sorted(epoch_order(3, 2, 50)) == list(range(50))
-    # one seed per (member, epoch, purpose): dropout and input noise never share a stream
-    seeds = {
-        epoch_seed(s, e, p) for s in (0, 1) for e in (0, 1) for p in ("dropout", "input_noise")
-    }
-    assert len(seeds) == 8 and epoch_seed(1, 1, "dropout") == epoch_seed(1, 1, "dropout")
+    # one seed per (member, epoch)
+    seeds = {epoch_seed(s, e, "dropout") for s in (0, 1) for e in (0, 1)}
+    assert len(seeds) == 4 and epoch_seed(1, 1, "dropout") == epoch_seed(1, 1, "dropout")
 
 
 def test_training_is_deterministic_resumes_exactly_and_learns(tmp_path, params, dataset_path):
@@ -92,47 +88,30 @@ def test_members_train_alike_in_any_group(tmp_path, params, dataset_path):
             torch.testing.assert_close(other[name], reference[name], rtol=1e-5, atol=1e-6)
 
 
-def test_pi_support_from_data_contacts(tmp_path, params, dataset_path):
-    """data_contacts trains on the data's flags, differs from lower_sole, and needs them."""
-    from pimann.learn.dataset import read_dataset
-
-    contacts = dataclasses.replace(
-        params, train=dataclasses.replace(params.train, pi_support="data_contacts", epochs=1)
-    )
-    lower = dataclasses.replace(
-        params, train=dataclasses.replace(params.train, pi_support="lower_sole", epochs=1)
-    )
-    train_models(dataset_path, tmp_path / "contacts", 1.0, [0], contacts, "cpu")
-    train_models(dataset_path, tmp_path / "lower", 1.0, [0], lower, "cpu")
-    a, b = _weights(tmp_path / "contacts" / "0"), _weights(tmp_path / "lower" / "0")
-    assert not torch.equal(a["expert_weight_2"], b["expert_weight_2"])
-    data = read_dataset(dataset_path)
-    data.train_contacts = data.test_contacts = None
-    bare = tmp_path / "bare.h5"
-    write_dataset(bare, data)
-    with pytest.raises(PimannError, match="contact flags"):
-        train_models(bare, tmp_path / "bare", 1.0, [0], contacts, "cpu")
-
-
 def test_pi_term_enters_the_gradient(params, dataset_path):
     from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
-    loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
+    cpu = torch.device("cpu")
+    loss = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
+                        pi_gradient="both")  # fmt: skip
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0]).eval()
     x = torch.as_tensor(data.x_train[None, :32])
     y = torch.as_tensor(data.y_train[None, :32])
 
     def gradient(weight: float) -> torch.Tensor:
         model.zero_grad()
-        mse, pi = loss(model(x), y)
-        (mse + weight * pi).sum().backward()
+        terms = loss(model(x), y)
+        total = terms.total(weight)
+        assert torch.equal(total, terms.data + weight * terms.physics)  # L = L_D + w L_B
+        total.sum().backward()
         return model.expert_weight_2.grad.clone()
 
     g0, g10 = gradient(0.0), gradient(10.0)
     assert not torch.allclose(g0, g10)
     # the ground-truth configuration variant changes the PI gradient, not the value's sign
-    truth = TrainingLoss(data.layout, data.stats, "ground_truth", torch.device("cpu"))
+    truth = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="ground_truth",
+                         pi_gradient="both")  # fmt: skip
     with torch.no_grad():
         pred = model(x)
         assert truth(pred, y)[1] > 0 and loss(pred, y)[1] > 0
@@ -177,8 +156,10 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
-    loss = TrainingLoss(data.layout, data.stats, "predicted", cpu, "lower_sole", side)
-    both = TrainingLoss(data.layout, data.stats, "predicted", cpu, "lower_sole", "both")
+    loss = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
+                        pi_gradient=side)  # fmt: skip
+    both = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
+                        pi_gradient="both")  # fmt: skip
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0]).eval()
     x = torch.as_tensor(data.x_train[None, :16])
     prediction = model(x).detach().requires_grad_(True)
@@ -201,7 +182,7 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
     from pimann.learn.dataset import read_dataset
 
     data = read_dataset(dataset_path)
-    loss = TrainingLoss(data.layout, data.stats, "predicted", torch.device("cpu"))
+    loss = TrainingLoss.from_params(params.train, data.layout, data.stats, torch.device("cpu"))
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0])
     x = torch.as_tensor(data.x_train[None, :32])
     y = torch.as_tensor(data.y_train[None, :32])
@@ -241,34 +222,6 @@ def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(datase
     assert not mask[layout.x_slices["base_rpy"]].any()
 
 
-def test_input_noise_moves_only_the_fed_back_inputs_per_member(params, dataset_path):
-    """Each member's noise comes from its own seed and epoch: alike in any group, new each
-    epoch; nothing where the std is 0 (the paper)."""
-    from pimann.learn.dataset import read_dataset
-
-    data = read_dataset(dataset_path)
-    columns = data.layout.fed_back_columns()
-    x = torch.as_tensor(np.stack([data.x_train[:16]] * 2))
-    cpu = torch.device("cpu")
-    assert InputNoise(0.0, columns, [0, 1], cpu)(x) is x
-    pair, alone = InputNoise(0.2, columns, [0, 1], cpu), InputNoise(0.2, columns, [1], cpu)
-    pair.start_epoch(3)
-    alone.start_epoch(3)
-    moved = pair(x) - x
-    assert torch.equal(moved[:, :, ~columns], torch.zeros_like(moved[:, :, ~columns]))
-    assert moved[:, :, columns].std().item() == pytest.approx(0.2, rel=0.15)
-    torch.testing.assert_close(alone(x[1:]) - x[1:], moved[1:])
-    assert not torch.allclose(moved[0], moved[1])
-    pair.start_epoch(4)
-    assert not torch.allclose(pair(x) - x, moved)
-
-
-def test_input_noise_trains_differently_and_deterministically(tmp_path, params, dataset_path):
-    one_epoch = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
-    trains_differently_and_deterministically(tmp_path, one_epoch, dataset_path, 0.0,
-                                             input_noise=0.2)  # fmt: skip
-
-
 def test_bf16_training_is_deterministic_and_recorded(tmp_path, params, dataset_path):
     """Two bf16 trainings of one seed give identical weights, not float32's, and say bf16."""
     runs = {}
@@ -298,7 +251,7 @@ def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
-    loss = TrainingLoss(data.layout, data.stats, "predicted", cpu, "data_contacts")
+    loss = TrainingLoss.from_params(params.train, data.layout, data.stats, cpu)
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0, 1]).train()
     x = torch.as_tensor(data.x_train[None, :64]).expand(2, -1, -1)
     y = torch.as_tensor(data.y_train[None, :64]).expand(2, -1, -1)
@@ -309,7 +262,10 @@ def test_bf16_and_float32_losses_of_a_batch_agree(params, dataset_path):
         with autocast(cpu, precision):
             prediction = model(x)
         assert prediction.dtype == (torch.bfloat16 if precision == "bfloat16" else torch.float32)
-        mse, pi = loss(prediction.float(), y, True, contacts)
+        mse = loss(prediction.float(), y, False).data
+        # L_B with the data's feet as support: the lower sole can swap on a near tie
+        terms = loss.pi_terms(prediction.float())
+        pi = loss.physics(**terms, support=contacts).mean(-1)
         losses[precision] = torch.stack([mse, pi])
     f32, bf16 = losses["float32"], losses["bfloat16"]
     assert (f32 > 0).all() and not torch.equal(f32, bf16)

@@ -159,7 +159,6 @@ class FeaturesParams:
     time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
     gait_phase: bool  # the gait phase in the state (pimann.learn.gait_phase; not the paper)
     gait_phase_step_s: Positive  # the longest step: a longer gap is a pause
-    gait_phase_per_foot: bool  # one phase per foot, touchdown 0 and lift-off pi (not PFNN's)
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -188,21 +187,8 @@ class TrainParams:
     restart_period: Count  # epochs of the first cosine cycle (Te)
     restart_mult: Count  # each cycle this many times longer (Tmult)
     pi_configuration: Literal["predicted", "ground_truth"]  # where the Jacobians are taken
-    pi_support: Literal["lower_sole", "data_contacts", "near_ground"]  # which feet L_B holds
     pi_gradient: Literal["both", "joints", "base", "joint_velocities"]  # what L_B's gradient moves
-    # weight of the joints' consistency term, added to L_D: ((s - s_true)/dt - (sdot - sdot_true))^2
-    consistency_weight: Float
-    # weight of L_F, added to L_D: the other sole's motion relative to the lower one near the ground
-    feet_weight: Float
-    # the joint velocities L_B pairs with the base twist: the predicted sdot_i (the paper) |
-    # the predicted joints' increments (s_i - s_{i-1}) / dt (what a rollout's joints do)
-    pi_joint_velocities: Literal["predicted", "increments"]
     pi_dropout: Bool  # L_B on the dropout-perturbed prediction (the paper) or without dropout
-    input_noise: NonNegative  # std (normalised units) of noise on the fed-back inputs; 0: the paper
-    rollout_states: Annotated[
-        Float, Field(ge=0, le=1)
-    ]  # share of samples with own-rollout inputs (pimann.rollout_states)
-    rollout_steps: Count  # frames of each own-rollout piece
     max_train_samples: Count | None  # evenly spaced subset of the training samples (quick runs)
     eval_batch_size: Count  # test-set batches (no effect on the result)
     device: Literal["auto", "cpu", "cuda"]

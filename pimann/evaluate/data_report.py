@@ -122,7 +122,9 @@ def _training_loss(layout):
         np.zeros(layout.output_dim),
         np.ones(layout.output_dim),
     )
-    return TrainingLoss(layout, stats, "ground_truth", torch.device("cpu"))
+    return TrainingLoss(
+        layout, stats, torch.device("cpu"), pi_configuration="ground_truth", pi_gradient="both"
+    )
 
 
 def data_pi_loss(trajectory: Trajectory, params: Params) -> dict[str, np.ndarray]:
@@ -350,7 +352,6 @@ def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -
                 "window": params.features.window,
                 "contact_margin_s": params.features.contact_margin_s,
             },
-            "train": {"pi_support": params.train.pi_support},
         },  # fmt: skip
         "thresholds": thresholds(),
         "authors": {

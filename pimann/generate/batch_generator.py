@@ -37,12 +37,12 @@ from pimann.core.rotations import (
     yaw_only,
 )
 from pimann.core.trajectory import Trajectory
+from pimann.generate.future_window import command_weights, next_future_matrix
 from pimann.generate.leg_odometry import Odometry
 from pimann.generate.rollout_network import RolloutNetwork
 from pimann.generate.steering import CarrotGoal, steer
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.features import clip_phase, first_differences
-from pimann.learn.future_window import command_weights, next_future_matrix
 from pimann.learn.gait_phase import unit_phase
 from pimann.learn.standing import StandingPose
 

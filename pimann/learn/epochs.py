@@ -1,5 +1,5 @@
 """What changes from one training epoch to the next: the learning-rate factor of cosine warm
-restarts, each member's sample order, and its seeds for dropout and input noise.
+restarts, each member's sample order, and its dropout seed.
 
 Every one is a function of (seed, epoch) alone, so a run resumed from its per-epoch
 checkpoint continues exactly as an uninterrupted one, and a member trains alike in any group.
@@ -10,7 +10,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-import torch
 
 from pimann.core.errors import PimannError
 
@@ -31,40 +30,11 @@ def epoch_order(seed: int, epoch: int, n: int) -> np.ndarray:
     return np.random.default_rng([seed, epoch]).permutation(n)
 
 
-# one random stream per purpose, so input noise and dropout masks never share draws
-_STREAMS = {"dropout": 0x5EED, "input_noise": 0x401, "rollout_states": 0x2011}
+# one random stream per purpose, so that a new purpose never shares the dropout masks' draws
+_STREAMS = {"dropout": 0x5EED}
 
 
 def epoch_seed(seed: int, epoch: int, purpose: str) -> int:
     """A member's seed for one epoch and one purpose (a key of `_STREAMS`): a function of
     (seed, epoch) only, so a resumed run needs no saved RNG state."""
     return int(np.random.SeedSequence([seed, epoch, _STREAMS[purpose]]).generate_state(1)[0])
-
-
-class InputNoise:
-    """train.input_noise: Gaussian noise on the inputs a rollout feeds back from its own
-    predictions (FeatureLayout.fed_back_columns), so the network learns to lead a state that
-    has drifted off the data back to it. Each member draws from its own seed and epoch."""
-
-    def __init__(self, std: float, columns: np.ndarray, seeds: list[int], device: torch.device):
-        self.std, self.seeds, self.device = std, seeds, device
-        self.columns = torch.as_tensor(columns, dtype=torch.float32, device=device)
-        self.generators: list[torch.Generator] = []
-
-    def start_epoch(self, epoch: int) -> None:
-        self.generators = [
-            torch.Generator(self.device).manual_seed(epoch_seed(seed, epoch, "input_noise"))
-            for seed in self.seeds
-        ]
-
-    def __call__(self, x: torch.Tensor) -> torch.Tensor:
-        """x (E, B, in) with noise on the fed-back columns; x itself where std is 0."""
-        if self.std == 0.0:
-            return x
-        noise = torch.stack(
-            [
-                torch.randn(x.shape[1:], generator=g, device=self.device, dtype=x.dtype)
-                for g in self.generators
-            ]
-        )
-        return x + self.std * noise * self.columns

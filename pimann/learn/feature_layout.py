@@ -36,8 +36,6 @@ class FeatureLayout:
     # (cos, sin) of the gait phase after the pose (pimann.learn.gait_phase), its longest step
     # in seconds; None: no phase (the paper)
     gait_phase_step_s: float | None = None
-    # one phase per foot (touchdown 0, lift-off pi) instead of the stride's one
-    gait_phase_per_foot: bool = False
 
     @property
     def gait_phase(self) -> bool:
@@ -45,13 +43,10 @@ class FeatureLayout:
 
     @property
     def gait_phase_names(self) -> list[str]:
-        """The phase block's columns: the stride's (cos, sin), or each foot's."""
+        """The phase block's columns: the stride's (cos, sin)."""
         if not self.gait_phase:
             return []
-        pairs = ["gait_phase"]
-        if self.gait_phase_per_foot:
-            pairs = ["gait_phase.left", "gait_phase.right"]
-        return [f"{pair}.{part}" for pair in pairs for part in ("cos", "sin")]
+        return ["gait_phase.cos", "gait_phase.sin"]
 
     def pose(self, position: np.ndarray, rpy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The base pose as the network sees it (input and output): `pose_input` applied."""
@@ -142,13 +137,10 @@ class FeatureLayout:
         return names
 
     def to_json(self) -> str:
-        """The layout as JSON; without the gait phase (or its per-foot switch) as before they
-        existed."""
+        """The layout as JSON; without the gait phase as before it existed."""
         fields = dataclasses.asdict(self)
         if fields["gait_phase_step_s"] is None:
             del fields["gait_phase_step_s"]
-        if not fields["gait_phase_per_foot"]:
-            del fields["gait_phase_per_foot"]
         return json.dumps(fields)
 
     @classmethod
@@ -176,8 +168,6 @@ class FeatureLayout:
             f"n_joints {layout.n_joints!r}": type(layout.n_joints) is int and layout.n_joints > 0,
             f"gait_phase_step_s {layout.gait_phase_step_s!r}": layout.gait_phase_step_s is None
             or (type(layout.gait_phase_step_s) in (int, float) and layout.gait_phase_step_s > 0),
-            f"gait_phase_per_foot {layout.gait_phase_per_foot!r}": type(layout.gait_phase_per_foot)
-            is bool,
         }
         bad = [what for what, fine in checks.items() if not fine]
         if bad:
@@ -243,5 +233,4 @@ def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> Featu
         frames(window.input_s), frames(window.output_s), rate_hz, variant,
         pose_input=params.pose_input,
         gait_phase_step_s=params.gait_phase_step_s if params.gait_phase else None,
-        gait_phase_per_foot=params.gait_phase and params.gait_phase_per_foot,
     )  # fmt: skip

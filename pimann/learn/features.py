@@ -41,7 +41,7 @@ from pimann.core.rotations import matrix_to_rpy, yaw_only
 from pimann.core.trajectory import Trajectory
 from pimann.learn.dataset import FeatureDataset
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
-from pimann.learn.gait_phase import foot_phases, gait_phase, phase_vector
+from pimann.learn.gait_phase import gait_phase, phase_vector
 from pimann.learn.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 from pimann.learn.standing import data_standing
 
@@ -77,15 +77,12 @@ def first_differences(
 
 
 def clip_phase(trajectory: Trajectory, layout: FeatureLayout) -> np.ndarray | None:
-    """(T, 2) the gait phase's (cos, sin) from the clip's contacts (pimann.learn.gait_phase;
-    (T, 4) the left's and the right's with one per foot), or None when the layout has none."""
+    """(T, 2) the gait phase's (cos, sin) from the clip's contacts (pimann.learn.gait_phase),
+    or None when the layout has none."""
     if not layout.gait_phase:
         return None
     if trajectory.contacts is None:
         raise PimannError(trajectory.source, "features.gait_phase needs the clip's contacts")
-    if layout.gait_phase_per_foot:
-        phases = foot_phases(trajectory.contacts, layout.rate_hz, layout.gait_phase_step_s)
-        return phase_vector(phases).reshape(len(phases), 4)
     phase = gait_phase(trajectory.contacts, layout.rate_hz, layout.gait_phase_step_s)
     return phase_vector(phase)
 

@@ -8,11 +8,6 @@ speed; a touchdown of the same foot as the previous one advances it a whole turn
 between touchdowns longer than `step_s`) holds the phase still until `step_s` before the next
 touchdown: standing does not advance it. Before the first touchdown the phase runs up to it over
 `step_s` (from half a turn earlier); after the last it holds.
-
-With `features.gait_phase_per_foot` (beyond PFNN: the local phases of Starke et al., SIGGRAPH
-2020) each foot has a phase of its own, 0 at each of its touchdowns and pi at each of its
-lift-offs, under the same pause rule: a lift-off sits at one phase value whatever the speed
-and the double support, where the stride's phase puts it wherever the style does.
 """
 
 from __future__ import annotations
@@ -59,23 +54,6 @@ def gait_phase(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarra
     # the next touchdown is half a turn on after the other foot's, a whole turn after its own
     values[1:] = np.pi * np.where(feet[1:] != feet[:-1], 1.0, 2.0)
     return _through_events(frames / rate_hz, np.cumsum(values), time, step_s)
-
-
-def foot_phases(contacts: np.ndarray, rate_hz: float, step_s: float) -> np.ndarray:
-    """(T, 2) each foot's unwrapped phase (left, right) of (T, 2) contact flags at `rate_hz`:
-    0 (mod 2 pi) at the foot's touchdowns, pi at its lift-offs, linear between, paused as the
-    stride's phase is (module docstring). A foot that never switches has phase 0."""
-    contacts = _flags(contacts, step_s)
-    time = np.arange(len(contacts)) / rate_hz
-    phases = np.zeros((len(contacts), 2))
-    for foot in range(2):
-        frames = np.flatnonzero(contacts[1:, foot] != contacts[:-1, foot]) + 1
-        if len(frames) == 0:
-            continue
-        first = 0.0 if contacts[frames[0], foot] else np.pi  # a touchdown or a lift-off
-        values = first + np.pi * np.arange(len(frames))  # events alternate: half a turn each
-        phases[:, foot] = _through_events(frames / rate_hz, values, time, step_s)
-    return phases
 
 
 def _through_events(

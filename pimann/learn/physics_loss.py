@@ -8,8 +8,9 @@ joint twists written in the base frame at the base origin (p_j a point on joint 
 its unit axis). It depends on the joints only: the base pose cancels, and enters the loss
 only through alpha (which sole is lower), which is not differentiated.
 
-`feet_motion` (L_F, beyond the paper) is the position-level counterpart: how far one frame's
-predicted joints move the other sole relative to the lower one while it is near the ground.
+`feet_motion` (L_F, a diagnostic of pimann.learn.teacher_forcing, not trained on) is the
+position-level counterpart: how far one frame's predicted joints move the other sole relative
+to the lower one while it is near the ground.
 """
 
 from __future__ import annotations
@@ -36,11 +37,8 @@ class PhysicsInformedLoss(nn.Module):
     alpha = 1 where the left sole is lower than the right one, as in the authors' code.
     With `support` (..., 2) flags of the feet in contact (the data's, not predicted), the
     residual is taken for each foot in contact and averaged over them: double support keeps
-    both feet still, a frame with no foot down adds nothing. With `near_ground` (m, the
-    contact rule's height), each foot's residual is weighted by how near the ground the
-    predicted pose puts it, sigmoid((near_ground - gap) / (near_ground / 4)) with gap its
-    height above the lower sole, and averaged with those weights: a foot lifting off still
-    counts while it is under the contact height, where the sliding metric counts it.
+    both feet still, a frame with no foot down adds nothing (the data report's L_B on the
+    data's contacts; training takes the lower sole).
     """
 
     def __init__(
@@ -48,10 +46,8 @@ class PhysicsInformedLoss(nn.Module):
         robot: Robot,
         dtype: torch.dtype | None = None,
         device: torch.device | str | None = None,
-        near_ground: float | None = None,
     ):
         super().__init__()
-        self.near_ground = near_ground
         self.kinematics = TorchKinematics(
             robot, dtype=dtype or torch.get_default_dtype(), device=device,
             frames=(LEFT_SOLE, RIGHT_SOLE),
@@ -105,15 +101,10 @@ class PhysicsInformedLoss(nn.Module):
         del base_position  # the body-fixed Jacobians and the sole height gap ignore it
         feet, chain = self.foot_twists(joints, joint_velocities)
         twist = torch.cat((base_linear_velocity, base_angular_velocity), -1)
-        if support is not None or self.near_ground is not None:
+        if support is not None:
             per_foot = (twist.unsqueeze(-2) + feet).square().mean(-1)  # (..., 2)
-            if support is not None:
-                weight = support.to(per_foot.dtype)
-                return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
-            heights = self.sole_heights(base_rpy, chain.frame_positions)
-            gap = heights - heights.min(-1, keepdim=True).values
-            weight = near_ground_weight(gap, self.near_ground)
-            return (per_foot * weight).sum(-1) / weight.sum(-1)
+            weight = support.to(per_foot.dtype)
+            return (per_foot * weight).sum(-1) / weight.sum(-1).clamp(min=1.0)
         left = self.left_is_support(base_rpy, chain.frame_positions)
         foot = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
         return (twist + foot).square().mean(-1)
@@ -134,7 +125,7 @@ class PhysicsInformedLoss(nn.Module):
         Its change over dt (m/s, and rad/s by the small-angle vee of the relative rotation),
         squared and averaged over the 6 components, is weighted by
         sigmoid((height - gap) 4 / height), the gap the other sole's height above the lower
-        one at s_i (no gradient), as `near_ground` weights L_B's feet.
+        one at s_i (no gradient), `near_ground_weight`.
         """
         now, before = self.kinematics.chains(joints), self.kinematics.chains(previous_joints)
         heights = self.sole_heights(base_rpy, now.frame_positions)

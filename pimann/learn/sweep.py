@@ -18,8 +18,7 @@ multiply, 1 - lr wd, before a weight-decay-free AdamW step; and with `train.pi_d
 false a w = 0 member takes the doubled forward pass the PI members need.
 
 Off CUDA the same step runs eagerly (what the CPU's tests check); on the CPU the stages keep
-pimann.learn.train, so the CPU's models do not change. `train.rollout_states` and
-`train.input_noise` (per-epoch own-rollout inputs and input noise) are not supported here.
+pimann.learn.train, so the CPU's models do not change.
 """
 
 from __future__ import annotations
@@ -44,7 +43,7 @@ from pimann.core.errors import PimannError
 from pimann.core.params import Params
 from pimann.core.progress import Progress
 from pimann.core.stage_times import note
-from pimann.learn.dataset import read_dataset
+from pimann.learn.dataset import FeatureDataset, read_dataset
 from pimann.learn.epochs import epoch_order, epoch_seed, schedule_factor
 from pimann.learn.held_out_loss import batched_loss
 from pimann.learn.mann import MANN
@@ -85,7 +84,8 @@ class _Step:
     """One training step of every member on fixed buffers, so that a CUDA graph can replay it.
 
     Reads the batch from `index` (E, size) and the schedule from the `lr` and `decay`
-    tensors; adds each member's batch-summed (L_D, L_B) to `totals` (2, E).
+    tensors; steps on each member's L = L_D + w L_B (`weights` (E,) its w) and adds its
+    batch-summed (L_D, L_B) to `totals` (2, E).
     """
 
     def __init__(
@@ -93,7 +93,7 @@ class _Step:
         model: MANN,
         optimizer: torch.optim.Optimizer,
         loss_fn: TrainingLoss,
-        data: tuple[torch.Tensor, torch.Tensor, torch.Tensor | None],
+        data: tuple[torch.Tensor, torch.Tensor],
         weights: torch.Tensor,
         decay: torch.Tensor,
         totals: torch.Tensor,
@@ -102,7 +102,7 @@ class _Step:
         precision: str,
     ):
         self.model, self.optimizer, self.loss_fn = model, optimizer, loss_fn
-        self.x, self.y, self.contacts = data
+        self.x, self.y = data
         self.weights, self.decay, self.totals = weights, decay, totals
         self.clean_pass, self.precision, self.size = clean_pass, precision, size
         self.with_pi = bool((weights != 0).any())
@@ -111,7 +111,6 @@ class _Step:
 
     def __call__(self) -> None:
         x, y = self.x[self.index], self.y[self.index]
-        contacts = None if self.contacts is None else self.contacts[self.index]
         clean = None
         # autocast's cast cache off: a graph must recast the weights at every replay
         with torch.autocast(x.device.type, torch.bfloat16, self.precision == "bfloat16", False):
@@ -121,13 +120,13 @@ class _Step:
                 prediction = self.model(x)
         prediction = prediction.float()  # the losses in float32
         clean = None if clean is None else clean.float()
-        mse, pi = self.loss_fn(prediction, y, self.with_pi, contacts, clean)
+        loss = self.loss_fn(prediction, y, self.with_pi, clean)
         self.optimizer.zero_grad(set_to_none=True)
-        (mse + self.weights * pi).sum().backward()
+        loss.total(self.weights).sum().backward()
         with torch.no_grad():
             torch._foreach_mul_(self.parameters, self.decay)  # AdamW's decoupled decay
         self.optimizer.step()
-        self.totals += torch.stack([mse.detach(), pi.detach()]) * self.size
+        self.totals += torch.stack([loss.data.detach(), loss.physics.detach()]) * self.size
 
 
 def _capture(steps: list[_Step], generators: list[torch.Generator]) -> list[Callable[[], None]]:
@@ -172,6 +171,7 @@ def _orders(seeds: list[int], epoch: int, n: int) -> np.ndarray:
     return np.stack([unique[seed] for seed in seeds])
 
 
+@_deterministic()  # torch's deterministic algorithms for the call
 def train_sweep(
     dataset_path: str | Path,
     pi_weights: list[float],
@@ -182,35 +182,19 @@ def train_sweep(
     checkpoint: str | Path | None = None,
     stop_after: int | None = None,
     progress: str | None = "train sweep",
+    data: FeatureDataset | None = None,
 ) -> dict[SweepMember, dict] | None:
     """Train every (w, seed) of the sweep as one ensemble; per member its best weights
     (`state_dict`, on the CPU), `best_epoch`, `best_loss` and per-epoch `history`.
 
     `graph`: replay the step as a CUDA graph (default: on CUDA). `checkpoint`: a file the run
     saves to every CHECKPOINT_EVERY_S and resumes from. `stop_after` stops after that many
-    epochs in total (returning None), a stand-in for an interruption.
+    epochs in total (returning None), a stand-in for an interruption. `data`: the dataset at
+    `dataset_path`, when the caller has read it already.
     """
-    with _deterministic():
-        return _train_sweep(
-            Path(dataset_path), list(pi_weights), list(seeds), params, torch.device(device),
-            graph, checkpoint, stop_after, progress,
-        )  # fmt: skip
-
-
-def _train_sweep(
-    dataset_path: Path,
-    pi_weights: list[float],
-    seeds: list[int],
-    params: Params,
-    device: torch.device,
-    graph: bool | None,
-    checkpoint: str | Path | None,
-    stop_after: int | None,
-    progress: str | None,
-) -> dict[SweepMember, dict] | None:
+    dataset_path, pi_weights, seeds = Path(dataset_path), list(pi_weights), list(seeds)
+    device = torch.device(device)
     config = params.train
-    if config.rollout_states or config.input_noise:
-        raise PimannError(None, "the sweep trainer has no train.rollout_states or input_noise")
     if not seeds or len(set(seeds)) != len(seeds) or len(set(pi_weights)) != len(pi_weights):
         raise PimannError(
             None, f"the sweep needs distinct seeds and weights: {pi_weights} x {seeds}"
@@ -222,21 +206,14 @@ def _train_sweep(
         os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
     members = sweep_members(pi_weights, seeds)
     count = len(members)
-    data = read_dataset(dataset_path)
-    if config.pi_support == "data_contacts" and data.train_contacts is None:
-        raise PimannError(
-            dataset_path, "has no contact flags, which train.pi_support data_contacts needs"
-        )
+    data = read_dataset(dataset_path) if data is None else data
     keep = torch.as_tensor(training_subset(len(data.x_train), config.max_train_samples))
+    keep = keep.to(device)
     x_train, y_train, x_test, y_test = (
         torch.as_tensor(a, dtype=torch.float32).to(device)
         for a in (data.x_train, data.y_train, data.x_test, data.y_test)
     )
-    x_train, y_train = x_train[keep.to(device)], y_train[keep.to(device)]
-    c_train = c_test = None
-    if config.pi_support == "data_contacts":
-        c_train = torch.as_tensor(data.train_contacts, dtype=torch.bool).to(device)[keep.to(device)]
-        c_test = torch.as_tensor(data.test_contacts, dtype=torch.bool).to(device)
+    x_train, y_train = x_train[keep], y_train[keep]
     n, batch = len(x_train), config.batch_size
     weight_decay = config.weight_decay / math.sqrt(math.ceil(n / batch) * config.restart_period)
     precision = pick_precision(config.precision, device)
@@ -248,11 +225,7 @@ def _train_sweep(
     decay = torch.ones((), device=device)
     optimizer = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=0.0, fused=True,
                                   capturable=device.type == "cuda")  # fmt: skip
-    loss_fn = TrainingLoss(
-        data.layout, data.stats, config.pi_configuration, device, config.pi_support,
-        config.pi_gradient, config.consistency_weight, config.pi_joint_velocities,
-        params.contacts.on_height, config.feet_weight,
-    )  # fmt: skip
+    loss_fn = TrainingLoss.from_params(config, data.layout, data.stats, device)
     weights = torch.tensor([m.pi_weight for m in members], device=device)
     best = {k: v.detach().clone() for k, v in model.state_dict().items()}
     best_loss = torch.full((count,), math.inf, device=device)
@@ -282,8 +255,8 @@ def _train_sweep(
     sizes = [batch] * (n // batch) + ([n % batch] if n % batch else [])
     clean_pass = any(m.pi_weight != 0.0 for m in members) and not config.pi_dropout
     steps = {
-        size: _Step(model, optimizer, loss_fn, (x_train, y_train, c_train), weights, decay,
-                    totals, size, clean_pass, precision)
+        size: _Step(model, optimizer, loss_fn, (x_train, y_train), weights, decay, totals, size,
+                    clean_pass, precision)
         for size in dict.fromkeys(sizes)
     }  # fmt: skip
     run: dict[int, Callable[[], None]] = dict(steps)
@@ -309,15 +282,15 @@ def _train_sweep(
             for generator, member in zip(model.dropout_generators, members, strict=True):
                 generator.manual_seed(epoch_seed(member.seed, epoch, "dropout"))
             order = torch.as_tensor(upcoming.result()).to(device)
-            upcoming = pool.submit(_orders, member_seeds, epoch + 1, n)  # while this one runs
+            if epoch + 1 < last:  # the next epoch's orders while this one runs
+                upcoming = pool.submit(_orders, member_seeds, epoch + 1, n)
             totals.zero_()
             at = 0
             for size in sizes:
                 steps[size].index.copy_(order[:, at : at + size])
                 run[size]()
                 at += size
-            test_mse, test_pi = batched_loss(model, loss_fn, x_test, y_test, c_test,
-                                             config.eval_batch_size)  # fmt: skip
+            test_mse, test_pi = batched_loss(model, loss_fn, x_test, y_test, config.eval_batch_size)
             history[epoch] = torch.stack([totals[0] / n, totals[1] / n, test_mse, test_pi])
             test = test_mse + weights * test_pi
             better = test < best_loss
@@ -410,13 +383,14 @@ def train_from_sweep(
     if float(pi_weight) not in pi_weights:
         raise PimannError(None, f"PI weight {pi_weight:g} is not in the sweep {pi_weights}")
     seeds = list(params.train.seeds)
+    data = read_dataset(dataset_path)
     fingerprint = _fingerprint(dataset_path, pi_weights, seeds, params)
     folder = out_dir.parent / SWEEP_DIR / fingerprint[:16]
     trained = folder / "members.pt"
     if not trained.is_file():
         folder.mkdir(parents=True, exist_ok=True)
         results = train_sweep(dataset_path, pi_weights, seeds, params, device,
-                              checkpoint=folder / "checkpoint.pt")  # fmt: skip
+                              checkpoint=folder / "checkpoint.pt", data=data)  # fmt: skip
         assert results is not None  # no stop_after
         with atomic_path(trained) as tmp:
             torch.save({_key(m.pi_weight, m.seed): r for m, r in results.items()}, tmp)
@@ -424,7 +398,6 @@ def train_from_sweep(
     else:
         log.info("w=%g from the sweep trained before: %s", pi_weight, folder)
     saved = torch.load(trained, map_location="cpu", weights_only=True)
-    data = read_dataset(dataset_path)
     members = {seed: saved[_key(float(pi_weight), seed)] for seed in seeds}
     samples = len(training_subset(len(data.x_train), params.train.max_train_samples))
     precision = pick_precision(params.train.precision, torch.device(device))

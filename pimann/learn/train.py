@@ -47,11 +47,10 @@ from pimann.core.params import Params, as_dict
 from pimann.core.progress import Progress
 from pimann.core.stage_times import note
 from pimann.learn.dataset import FeatureDataset, read_dataset
-from pimann.learn.epochs import InputNoise, epoch_order, epoch_seed, schedule_factor
-from pimann.learn.held_out_loss import HeldOutLoss, batched_loss
+from pimann.learn.epochs import epoch_order, epoch_seed, schedule_factor
+from pimann.learn.held_out_loss import batched_loss
 from pimann.learn.mann import MANN
 from pimann.learn.model_files import save_model
-from pimann.learn.rollout_states import training_states
 from pimann.learn.training_loss import TrainingLoss
 
 log = logging.getLogger(__name__)
@@ -126,8 +125,7 @@ def _fingerprint(
         "workers": 0,
     }  # what does not change the result
     digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
-    model, height = as_dict(params.model), params.contacts.on_height  # height: near_ground
-    blob = json.dumps([digest, pi_weight, seeds, model, train, height], sort_keys=True)
+    blob = json.dumps([digest, pi_weight, seeds, as_dict(params.model), train], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
 
@@ -143,6 +141,18 @@ def _deterministic():
         torch.use_deterministic_algorithms(before, warn_only=warn)
 
 
+@contextlib.contextmanager
+def _torch_threads(threads: int):
+    """torch's thread count for a training group, the caller's restored after (a group may
+    train in the caller's process)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
+
+
 def train_models(
     dataset_path: str | Path,
     out_dir: str | Path,
@@ -156,40 +166,19 @@ def train_models(
 ) -> dict[int, dict]:
     """Train one model per seed for `pi_weight`; write out_dir/<seed>/ and the loss CSVs.
 
-    Resumes from `checkpoint_dir` (default: out_dir's sibling `.checkpoints/<name>`) when a
-    checkpoint of the same data and parameters is there (it is removed once the models are
-    written). `stop_after` stops after that many epochs in total without writing the models (a
-    stand-in for an interruption). Returns each seed's meta data.
+    The seeds are split into `train.workers` groups, each trained by `_train_group` in its
+    own process. Resumes from `checkpoint_dir` (default: out_dir's sibling
+    `.checkpoints/<name>`) when a checkpoint of the same data and parameters is there (it is
+    removed once the models are written). `stop_after` stops after that many epochs in total
+    without writing the models (a stand-in for an interruption). Returns each seed's meta data.
     """
-    with _deterministic():
-        return _train(
-            Path(dataset_path), Path(out_dir), pi_weight, list(seeds), params, device,
-            checkpoint_dir, plots_dir, stop_after,
-        )  # fmt: skip
-
-
-def _train(
-    dataset_path: Path,
-    out_dir: Path,
-    pi_weight: float,
-    seeds: list[int],
-    params: Params,
-    device: torch.device | str | None,
-    checkpoint_dir: str | Path | None,
-    plots_dir: str | Path | None,
-    stop_after: int | None,
-) -> dict[int, dict]:
-    """train_models' body: the seeds split into `train.workers` groups, then the outputs."""
+    dataset_path, out_dir, seeds = Path(dataset_path), Path(out_dir), list(seeds)
     if not seeds or len(set(seeds)) != len(seeds):
         raise PimannError(None, f"train.seeds must be distinct and non-empty, not {seeds}")
     config = params.train
     device = pick_device(config.device) if device is None else torch.device(device)
     checkpoint_dir = Path(checkpoint_dir or out_dir.parent / ".checkpoints" / out_dir.name)
     data = read_dataset(dataset_path)  # read here too: bad data fails before any worker starts
-    if config.pi_support == "data_contacts" and pi_weight != 0.0 and data.train_contacts is None:
-        raise PimannError(
-            dataset_path, "has no contact flags, which train.pi_support data_contacts needs"
-        )
     precision = pick_precision(config.precision, device)
     threads = training_threads(config.threads)
     workers = 1 if device.type == "cuda" else cpu_workers(min(config.workers, len(seeds), threads))
@@ -220,6 +209,161 @@ def _train(
                          precision, n)  # fmt: skip
     shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
     return metas
+
+
+@dataclasses.dataclass(frozen=True)
+class _GroupJob:
+    """What one training process needs (picklable, for spawned workers)."""
+
+    dataset_path: Path
+    seeds: list[int]
+    pi_weight: float
+    params: Params
+    device: str
+    checkpoint_dir: Path
+    stop_after: int | None
+    threads: int  # torch threads of the group's process
+    precision: str  # float32 | bfloat16 (resolved)
+    progress: str | None  # the label of the group that reports the stage's progress
+
+
+def _train_group(job: _GroupJob) -> dict[int, dict] | None:
+    """Train the ensemble of `job.seeds` (one worker process's share); per seed its best
+    weights, epoch, loss and history.
+
+    None when stopped by `stop_after` before the last epoch (the checkpoint is kept).
+    """
+    with _torch_threads(job.threads), _deterministic():
+        config, seeds, pi_weight = job.params.train, job.seeds, job.pi_weight
+        device = torch.device(job.device)
+        if device.type == "cuda":
+            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
+
+        # the data, on the device
+        data = read_dataset(job.dataset_path)
+        keep = training_subset(len(data.x_train), config.max_train_samples)
+        if len(keep) < len(data.x_train):
+            data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
+            log.debug("training on %d evenly spaced of the training samples", len(keep))
+        x_train, y_train, x_test, y_test = (
+            torch.as_tensor(a, dtype=torch.float32, device=device)
+            for a in (data.x_train, data.y_train, data.x_test, data.y_test)
+        )
+        n, batch = len(x_train), config.batch_size
+
+        # the ensemble, its optimiser and its loss
+        batches = math.ceil(n / batch)
+        weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)
+        model = MANN.from_seeds(
+            data.layout.input_dim, data.layout.output_dim, job.params.model, seeds
+        )
+        model.to(device).train()
+        # fused: one kernel over every parameter, 3.6x faster than the default per-tensor loop
+        # on the CPU (4.2 vs 15.1 ms a step for a 5-member ensemble), the same update
+        optimizer = torch.optim.AdamW(
+            model.parameters(), lr=config.learning_rate, weight_decay=weight_decay, fused=True
+        )
+        loss_fn = TrainingLoss.from_params(config, data.layout, data.stats, device)
+
+        # resumed from the checkpoint of the same data and parameters, if any
+        fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
+        members = len(seeds)
+        state = _State(
+            0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
+            [math.inf] * members, [-1] * members, [[] for _ in seeds],
+        )  # fmt: skip
+        if checkpoint.is_file():
+            saved = torch.load(checkpoint, map_location=device, weights_only=True)
+            if saved.get("fingerprint") == fingerprint and saved["epoch"] <= config.epochs:
+                state = _State(**{f.name: saved[f.name] for f in dataclasses.fields(_State)})
+                model.load_state_dict(state.model)
+                optimizer.load_state_dict(state.optimizer)
+                log.info("resuming seeds %s from epoch %d", seeds, state.epoch)
+            else:
+                log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
+
+        with_pi = pi_weight != 0.0
+        last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
+        progress = Progress(
+            config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
+            enabled=job.progress is not None,
+        )  # fmt: skip
+        for epoch in range(state.epoch, last):
+            factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
+            for group in optimizer.param_groups:
+                group["lr"] = config.learning_rate * factor
+                group["weight_decay"] = weight_decay * factor
+            model.seed_dropout([epoch_seed(seed, epoch, "dropout") for seed in seeds])
+            order = torch.as_tensor(
+                np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
+            )  # (E, N)
+
+            # one epoch of steps on L = L_D + w L_B
+            totals = torch.zeros(2, members, device=device)
+            for start in range(0, n, batch):
+                index = order[:, start : start + batch]
+                x = x_train[index]
+                clean = None
+                with autocast(device, job.precision):
+                    if with_pi and not config.pi_dropout:
+                        prediction, clean = model.forward_with_clean(x)
+                    else:
+                        prediction = model(x)
+                prediction = prediction.float()  # the losses in float32
+                clean = None if clean is None else clean.float()
+                loss = loss_fn(prediction, y_train[index], with_pi, clean)
+                optimizer.zero_grad(set_to_none=True)
+                loss.total(pi_weight).sum().backward()
+                optimizer.step()
+                terms = torch.stack([loss.data.detach(), loss.physics.detach()])
+                totals += terms * index.shape[1]
+
+            # the epoch's losses; each member's best epoch by its test loss
+            train_mse, train_pi = (totals / n).tolist()
+            test = batched_loss(model, loss_fn, x_test, y_test, config.eval_batch_size)
+            test_mse, test_pi = (t.tolist() for t in test)
+            if not with_pi:  # the PI term of a w=0 model, on a sample of the training set
+                every = max(1, n // 4096)
+                sample = (x_train[::every], y_train[::every])
+                train_pi = batched_loss(model, loss_fn, *sample, config.eval_batch_size)[1]
+                train_pi = train_pi.tolist()
+            for k in range(members):
+                row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
+                row.update(
+                    train_loss=train_mse[k] + pi_weight * train_pi[k], train_mse=train_mse[k],
+                    train_pi=train_pi[k], test_loss=test_mse[k] + pi_weight * test_pi[k],
+                    test_mse=test_mse[k], test_pi=test_pi[k],
+                )  # fmt: skip
+                state.history[k].append(row)
+                if row["test_loss"] < state.best_loss[k]:
+                    state.best_loss[k], state.best_epoch[k] = row["test_loss"], epoch + 1
+                    for name, value in model.state_dict().items():
+                        state.best[name][k] = value[k].detach()
+            mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
+            progress.update(postfix=f"train {mean['train_loss']:.4f}, test {mean['test_loss']:.4f}")
+            log.debug(
+                "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f "
+                "(mse %.5f, pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
+                *(mean[c] for c in LOSS_COLUMNS),
+            )  # fmt: skip
+            state.epoch = epoch + 1
+            state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
+            with atomic_path(checkpoint) as tmp:
+                torch.save({**dataclasses.asdict(state), "fingerprint": fingerprint}, tmp)
+        progress.close()
+        if state.epoch < config.epochs:
+            return None
+        model.load_state_dict(state.best)
+        return {
+            seed: {
+                "state_dict": {k: v.cpu() for k, v in model.member(i).state_dict().items()},
+                "best_epoch": state.best_epoch[i],
+                "best_loss": state.best_loss[i],
+                "history": state.history[i],
+            }
+            for i, seed in enumerate(seeds)
+        }
 
 
 def training_subset(n: int, max_samples: int | None) -> np.ndarray:
@@ -265,178 +409,6 @@ def write_models(
             for seed, member in members.items():
                 write_loss_csv(tmp / f"seed{seed}.csv", member["history"])
     return metas
-
-
-@dataclasses.dataclass(frozen=True)
-class _GroupJob:
-    """What one training process needs (picklable, for spawned workers)."""
-
-    dataset_path: Path
-    seeds: list[int]
-    pi_weight: float
-    params: Params
-    device: str
-    checkpoint_dir: Path
-    stop_after: int | None
-    threads: int  # torch threads of the group's process
-    precision: str  # float32 | bfloat16 (resolved)
-    progress: str | None  # the label of the group that reports the stage's progress
-
-
-def _train_group(job: _GroupJob) -> dict[int, dict] | None:
-    """Train the ensemble of `job.seeds`; per seed its best weights, epoch, loss and history.
-
-    None when stopped by `stop_after` before the last epoch (the checkpoint is kept).
-    """
-    before = torch.get_num_threads()
-    torch.set_num_threads(job.threads)
-    try:
-        with _deterministic():
-            return _train_ensemble(job)
-    finally:
-        torch.set_num_threads(before)
-
-
-def _train_ensemble(job: _GroupJob) -> dict[int, dict] | None:
-    """_train_group's body (see there)."""
-    config, seeds, pi_weight = job.params.train, job.seeds, job.pi_weight
-    device = torch.device(job.device)
-    if device.type == "cuda":
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
-    checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
-
-    data = read_dataset(job.dataset_path)
-    keep = training_subset(len(data.x_train), config.max_train_samples)
-    states, test_rollouts = training_states(
-        config, job.params.rollout.command_blend_tau, data, keep, job.seeds, device
-    )  # rolled out from every training sample
-    if len(keep) < len(data.x_train):
-        data.x_train, data.y_train = data.x_train[keep], data.y_train[keep]
-        if data.train_contacts is not None:
-            data.train_contacts = data.train_contacts[keep]
-        log.debug("training on %d evenly spaced of the training samples", len(keep))
-    x_train, y_train, x_test, y_test = (
-        torch.as_tensor(a, dtype=torch.float32, device=device)
-        for a in (data.x_train, data.y_train, data.x_test, data.y_test)
-    )
-    c_train = c_test = None  # the data's contacts, loaded only where L_B uses them
-    if config.pi_support == "data_contacts":
-        c_train, c_test = (
-            None if c is None else torch.as_tensor(c, dtype=torch.bool, device=device)
-            for c in (data.train_contacts, data.test_contacts)
-        )
-    n, batch = len(x_train), config.batch_size
-    batches = math.ceil(n / batch)
-    weight_decay = config.weight_decay / math.sqrt(batches * config.restart_period)
-    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, job.params.model, seeds)
-    model.to(device).train()
-    # fused: one kernel over every parameter, 3.6x faster than the default per-tensor loop on
-    # the CPU (4.2 vs 15.1 ms a step for a 5-member ensemble), the same update
-    optimizer = torch.optim.AdamW(
-        model.parameters(), lr=config.learning_rate, weight_decay=weight_decay, fused=True
-    )
-    loss_fn = TrainingLoss(
-        data.layout, data.stats, config.pi_configuration, device, config.pi_support,
-        config.pi_gradient, config.consistency_weight, config.pi_joint_velocities,
-        job.params.contacts.on_height, config.feet_weight,
-    )  # fmt: skip
-    fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
-    members = len(seeds)
-    state = _State(
-        0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
-        [math.inf] * members, [-1] * members, [[] for _ in seeds],
-    )  # fmt: skip
-    if checkpoint.is_file():
-        saved = torch.load(checkpoint, map_location=device, weights_only=True)
-        if saved.get("fingerprint") == fingerprint and saved["epoch"] <= config.epochs:
-            state = _State(**{f.name: saved[f.name] for f in dataclasses.fields(_State)})
-            model.load_state_dict(state.model)
-            optimizer.load_state_dict(state.optimizer)
-            log.info("resuming seeds %s from epoch %d", seeds, state.epoch)
-        else:
-            log.info("ignoring a checkpoint of other data or parameters: %s", checkpoint)
-
-    test_loss = HeldOutLoss(loss_fn, x_test, y_test, c_test, config.eval_batch_size, test_rollouts,
-                         config.rollout_states)  # fmt: skip
-    with_pi_train = pi_weight != 0.0
-    noise = InputNoise(config.input_noise, data.layout.fed_back_columns(), seeds, device)
-    last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
-    progress = Progress(
-        config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
-        enabled=job.progress is not None,
-    )  # fmt: skip
-    for epoch in range(state.epoch, last):
-        factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
-        for group in optimizer.param_groups:
-            group["lr"] = config.learning_rate * factor
-            group["weight_decay"] = weight_decay * factor
-        model.seed_dropout([epoch_seed(seed, epoch, "dropout") for seed in seeds])
-        noise.start_epoch(epoch)
-        states.start_epoch(model, epoch)
-        order = torch.as_tensor(
-            np.stack([epoch_order(s, epoch, n) for s in seeds]), device=device
-        )  # (E, N)
-        totals = torch.zeros(2, members, device=device)
-        for start in range(0, n, batch):
-            index = order[:, start : start + batch]
-            contacts = None if c_train is None else c_train[index]
-            x = noise(states(x_train[index], index))
-            clean = None
-            with autocast(device, job.precision):
-                if with_pi_train and not config.pi_dropout:
-                    prediction, clean = model.forward_with_clean(x)
-                else:
-                    prediction = model(x)
-            prediction = prediction.float()  # the losses in float32
-            clean = None if clean is None else clean.float()
-            mse, pi = loss_fn(prediction, y_train[index], with_pi_train, contacts, clean)
-            optimizer.zero_grad(set_to_none=True)
-            (mse + pi_weight * pi).sum().backward()
-            optimizer.step()
-            totals += torch.stack([mse.detach(), pi.detach()]) * index.shape[1]
-        train_mse, train_pi = (totals / n).tolist()
-        test_mse, test_pi = (t.tolist() for t in test_loss(model))
-        if not with_pi_train:  # the PI term of a w=0 model, on a sample of the training set
-            every = max(1, n // 4096)
-            sample = (x_train[::every], y_train[::every])
-            sample += (None if c_train is None else c_train[::every],)
-            train_pi = batched_loss(model, loss_fn, *sample, config.eval_batch_size)[1].tolist()
-        for k in range(members):
-            row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
-            row.update(
-                train_loss=train_mse[k] + pi_weight * train_pi[k], train_mse=train_mse[k],
-                train_pi=train_pi[k], test_loss=test_mse[k] + pi_weight * test_pi[k],
-                test_mse=test_mse[k], test_pi=test_pi[k],
-            )  # fmt: skip
-            state.history[k].append(row)
-            if row["test_loss"] < state.best_loss[k]:
-                state.best_loss[k], state.best_epoch[k] = row["test_loss"], epoch + 1
-                for name, value in model.state_dict().items():
-                    state.best[name][k] = value[k].detach()
-        mean = {c: float(np.mean([h[-1][c] for h in state.history])) for c in LOSS_COLUMNS}
-        progress.update(postfix=f"train {mean['train_loss']:.4f}, test {mean['test_loss']:.4f}")
-        log.debug(
-            "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f (mse %.5f, "
-            "pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
-            *(mean[c] for c in LOSS_COLUMNS),
-        )  # fmt: skip
-        state.epoch = epoch + 1
-        state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
-        with atomic_path(checkpoint) as tmp:
-            torch.save({**dataclasses.asdict(state), "fingerprint": fingerprint}, tmp)
-    progress.close()
-    if state.epoch < config.epochs:
-        return None
-    model.load_state_dict(state.best)
-    return {
-        seed: {
-            "state_dict": {k: v.cpu() for k, v in model.member(i).state_dict().items()},
-            "best_epoch": state.best_epoch[i],
-            "best_loss": state.best_loss[i],
-            "history": state.history[i],
-        }
-        for i, seed in enumerate(seeds)
-    }
 
 
 def write_loss_csv(path: Path, history: list[dict]) -> None:

@@ -2,10 +2,6 @@
 (pimann.generate.rollout_batch, step 2): the previous prediction's output window, which is
 already one frame ahead (y_i holds the window of frame i + 1, pimann.learn.features), blended
 with the command.
-Shared by the generator and by training on the model's own rollouts (pimann.learn.rollout_states).
-
-Under 60 lines, a module of its own: the generator (generate) and the training (learn) both
-use it, so it sits in learn, below both.
 """
 
 from __future__ import annotations
