@@ -132,7 +132,7 @@ def feet_motion(
 
 def integrated_joints(layout, stats, x: np.ndarray, predicted: np.ndarray) -> np.ndarray:
     """`predicted` (normalised) with its joints replaced by s_{i-1} + dt sdot_i, the input's
-    joints moved by the predicted joint velocities (rollout.joint_position_blend 0)."""
+    joints moved by the predicted joint velocities."""
     ys = layout.y_slices["joints"]
     before = input_joints(layout, stats, x)
     sdot = output_part(layout, stats, predicted, "joint_velocities")

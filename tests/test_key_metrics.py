@@ -56,7 +56,9 @@ def test_key_metrics_are_flat_and_few(params, results, tmp_path):
 
 def test_key_metrics_values(params, results):
     metrics = key_metrics(results, params)
-    claims = evaluate_claims(read_metrics(results / "metrics.csv"), params.evaluate)
+    claims = evaluate_claims(
+        read_metrics(results / "metrics.csv"), params.evaluate, params.train.pi_gradient
+    )
     assert metrics["claims.total"] == len(claims) == 14
     assert metrics["claims.holding"] == sum(c.status == HOLDS for c in claims) > 0
     for claim in claims:
