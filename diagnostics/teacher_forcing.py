@@ -17,7 +17,7 @@ foot cancels the base's forward velocity: L_B charges their sum, so where a mode
 small base velocity this tells whether its legs shrank with it; and the slope of the
 predicted leg joint steps on the data's (`leg_step_slope`: 1, the legs move as the data's);
 and L_F (`feet_true`, `feet_pred`: the other sole's motion relative to the lower one near the
-ground over the frame, pimann.learn.physics_loss.feet_motion, from the input's joints to the
+ground over the frame, `relative_sole_motion`, from the input's joints to the
 data's and to the predicted ones): how far one step from the data's state moves the other
 sole. It does not predict a rollout's sliding: trained with less dropout, a model halves it
 and its rollouts slide more (docs/walking_directions.md). Beside
@@ -43,8 +43,10 @@ from pimann.core.robot import LEG_JOINTS
 from pimann.core.trajectory import iter_collection
 from pimann.learn.dataset import read_dataset
 from pimann.learn.features import REVERSED_SUFFIX, time_reversed
+from pimann.learn.kinematics_torch import rotation_vee
 from pimann.learn.model_files import model_seeds
 from pimann.learn.motion_classes import CLASSES, motion_classes
+from pimann.learn.physics_loss import PhysicsInformedLoss
 from pimann.learn.training_loss import TrainingLoss
 
 # the next frame's base velocity (y_i's window is of frame i + 1: not an input column)
@@ -106,6 +108,51 @@ def contact_leg_velocity(
     return np.where(contacts.sum(axis=1) == 1, share, np.nan)
 
 
+def near_ground_weight(gap: torch.Tensor, height: float) -> torch.Tensor:
+    """How much a sole `gap` metres above the lower one counts as down: sigmoid((height - gap)
+    4 / height), 0.98 on the ground, 0.5 at the contact height, 0.02 at twice it."""
+    return torch.sigmoid((height - gap) * (4.0 / height))
+
+
+def relative_sole_motion(
+    physics: PhysicsInformedLoss,
+    previous_joints: torch.Tensor,
+    joints: torch.Tensor,
+    base_rpy: torch.Tensor,
+    dt: float,
+    height: float,
+) -> torch.Tensor:
+    """(...,) L_F: how fast the other sole moves relative to the lower one from one frame's
+    joints to the next, weighted by how near the ground it is.
+
+    Both soles still on the ground keep their relative pose: the other sole's pose in the
+    lower sole's frame, R_l^T (p_o - p_l) and R_l^T R_o, is the same at s_{i-1} and s_i.
+    Its change over dt (m/s, and rad/s by the small-angle vee of the relative rotation),
+    squared and averaged over the 6 components, is weighted by
+    sigmoid((height - gap) 4 / height), the gap the other sole's height above the lower
+    one at s_i (no gradient), `near_ground_weight`.
+    """
+    now, before = physics.kinematics.chains(joints), physics.kinematics.chains(previous_joints)
+    heights = physics.sole_heights(base_rpy, now.frame_positions)
+    left = physics.lower_is_left(heights).unsqueeze(-1)
+    weight = near_ground_weight((heights[..., 0] - heights[..., 1]).abs(), height)
+
+    def relative(chain):
+        p, r = chain.frame_positions, chain.frame_rotations
+        lower_p = torch.where(left, p[..., 0, :], p[..., 1, :])
+        other_p = torch.where(left, p[..., 1, :], p[..., 0, :])
+        lower_r = torch.where(left.unsqueeze(-1), r[..., 0, :, :], r[..., 1, :, :])
+        other_r = torch.where(left.unsqueeze(-1), r[..., 1, :, :], r[..., 0, :, :])
+        lower_t = lower_r.transpose(-1, -2)
+        return (lower_t @ (other_p - lower_p).unsqueeze(-1)).squeeze(-1), lower_t @ other_r
+
+    p1, r1 = relative(now)
+    p0, r0 = relative(before)
+    angle = rotation_vee(r0.transpose(-1, -2) @ r1)
+    rate = torch.cat((p1 - p0, angle), -1) / dt
+    return weight * rate.square().mean(-1)
+
+
 def feet_motion(
     loss: TrainingLoss,
     layout,
@@ -123,7 +170,8 @@ def feet_motion(
     after = output_part(layout, stats, joints_from, "joints")
     angles = output_part(layout, stats, y, "base_rpy")
     with torch.no_grad():
-        motion = loss.physics.feet_motion(
+        motion = relative_sole_motion(
+            loss.physics,
             *(torch.as_tensor(a, dtype=torch.float32) for a in (before, after, angles)),
             dt=1.0 / layout.rate_hz, height=height,
         )  # fmt: skip

@@ -1,4 +1,4 @@
-"""Atomic outputs (pimann.atomic): the target appears whole or not at all."""
+"""Atomic outputs (pimann.core.atomic): the target appears whole or not at all."""
 
 from __future__ import annotations
 

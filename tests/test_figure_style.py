@@ -1,4 +1,4 @@
-"""What every figure shares (pimann.figure_style): style, colours, footer, atomic saving with
+"""What every figure shares (pimann.evaluate.figure_style): style, colours, footer, atomic saving with
 the provenance in the files' metadata."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""What a stage's log shows (pimann.logs): our lines, quiet libraries, -v for detail."""
+"""What a stage's log shows (pimann.core.logs): our lines, quiet libraries, -v for detail."""
 
 from __future__ import annotations
 

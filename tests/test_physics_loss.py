@@ -7,6 +7,7 @@ import pinocchio as pin
 import pytest
 import torch
 
+from diagnostics.teacher_forcing import relative_sole_motion
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE
 from pimann.learn.physics_loss import PhysicsInformedLoss
 
@@ -131,14 +132,14 @@ def test_leading_dims_and_float32(robot, rng):
 
 
 def test_feet_motion_is_the_other_soles_motion_seen_from_the_lower_one(robot, loss, rng):
-    """L_F against pinocchio: the other sole's pose in the lower sole's frame at two
+    """L_F (a diagnostic) against pinocchio: the other sole's pose in the lower sole's frame at two
     configurations, its change over dt (linear; small-angle rotation), weighted by height."""
     dt, height = 0.02, 0.3
     before = rng.uniform(robot.joint_lower, robot.joint_upper, size=(10, 26))
     after = before + rng.normal(scale=0.005, size=before.shape)  # about one frame's step
     rpy = rng.uniform([-0.2, -0.2, -np.pi], [0.2, 0.2, np.pi], size=(10, 3))
-    value = loss.feet_motion(
-        *(torch.tensor(a) for a in (before, after, rpy)), dt=dt, height=height
+    value = relative_sole_motion(
+        loss, *(torch.tensor(a) for a in (before, after, rpy)), dt=dt, height=height
     ).numpy()
     expected, weights = [], []
     for q0, q1, angles in zip(before, after, rpy, strict=True):
@@ -159,5 +160,7 @@ def test_feet_motion_is_the_other_soles_motion_seen_from_the_lower_one(robot, lo
     np.testing.assert_allclose(value, expected, rtol=3e-4)  # small-angle vee against log3
     assert min(weights) < 0.2 and max(weights) > 0.5  # heights that count and do not
     assert np.min(expected) > 0  # the feet move relative to each other
-    still = loss.feet_motion(*(torch.tensor(a) for a in (after, after, rpy)), dt=dt, height=height)
+    still = relative_sole_motion(
+        loss, *(torch.tensor(a) for a in (after, after, rpy)), dt=dt, height=height
+    )
     assert still.abs().max() < 1e-20  # no motion, no loss

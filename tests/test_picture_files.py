@@ -1,4 +1,4 @@
-"""Writing pictures (pimann.picture_files): strips laid out as documented, animations with
+"""Writing pictures (pimann.render.picture_files): strips laid out as documented, animations with
 every frame, unknown formats refused before anything is written."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The drawing of the renderer (pimann.render_scene): the camera's projection and what a frame
+"""The drawing of the renderer (pimann.render.scene): the camera's projection and what a frame
 shows, read back from its pixels."""
 
 from __future__ import annotations

@@ -155,7 +155,7 @@ class FeaturesParams:
     split_seed: Int
     contact_margin_s: NonNegative  # carried contact flags drop this long around every switch
     pose_input: Literal["world", "gravity"]  # the base pose the network sees (features.py)
-    # motion classes (pimann.motion_classes) whose training clips are added time-reversed
+    # motion classes (pimann.learn.motion_classes) whose training clips are added time-reversed
     time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
     gait_phase: bool  # the gait phase in the state (pimann.learn.gait_phase; not the paper)
     gait_phase_step_s: Positive  # the longest step: a longer gap is a pause
@@ -194,7 +194,7 @@ class TrainParams:
     device: Literal["auto", "cpu", "cuda"]
     workers: Count  # CPU processes the seeds are split among (no effect on the result)
     # the network's products under autocast in bfloat16, or float32; auto: bfloat16 where the
-    # hardware has it (pimann.train.pick_precision)
+    # hardware has it (pimann.learn.train.pick_precision)
     precision: Literal["float32", "bfloat16", "auto"]
     threads: Count | Literal["auto"]  # torch threads in all; auto: the free cores (no effect)
     # also train, roll out and measure the ADHERENT baseline (models/adherent: its own
@@ -265,7 +265,7 @@ class RolloutParams:
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     scenarios: dict[Str, list[_Command]]
     scenario_names: list[Str]  # the scenarios the DVC rollout stage generates
-    # the command-following benchmark: also roll out each test clip's script (pimann.rollouts)
+    # the command-following benchmark: also roll out each test clip's script (pimann.generate.benchmark_clips)
     benchmark_clips: Bool
     # ... and this many training clips' per motion class (in-distribution level); 0: none
     benchmark_train_clips: NonNegativeInt
@@ -301,7 +301,7 @@ class RolloutParams:
 @dataclass(frozen=True, config=CONFIG)
 class ContactParams:
     """contacts: the contact rule of generated trajectories, a Schmitt trigger on the lowest
-    sole corner (pimann.contacts), shared by every stage that detects contacts."""
+    sole corner (pimann.core.contacts), shared by every stage that detects contacts."""
 
     on_height: Positive  # m, lowest sole corner below this -> contact (after the delay)
     off_height: Positive  # m, above this -> no contact (after the delay)

@@ -15,7 +15,7 @@ generated trajectories is applied here, with the same functions and contact rule
   feet with the lower one held: RMS over the 3 linear / 3 angular components of the sole
   velocity in `evaluate.foot_velocity_frame`, summed over frames in contact, left and
   right sums averaged) with the shared contact rule (params.yaml `contacts`, the Schmitt
-  trigger of pimann.contacts on the lowest sole corner) and with the file's own
+  trigger of pimann.core.contacts on the lowest sole corner) and with the file's own
   flags. A sum grows with the frames, so it is scaled as the paper's 10 s test: the mean per
   frame times `PAPER_FRAMES` (500 frames, 10 s at 50 Hz). Per motion class it is restricted to
   the frames of that class (frames whose 1 s window is, e.g., forward walking), where the class

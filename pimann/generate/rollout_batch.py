@@ -215,7 +215,7 @@ def generate_rollout(
 ) -> Rollout:
     """Roll the network out over `scenario`; see the module docstring for every rule.
 
-    A batch of one (pimann.generate.batch_generator.generate_batch): the same trajectory as its row
+    A batch of one (`generate_batch`): the same trajectory as its row
     of any batch. `standing`: the pose to start from and return to (default: the nominal one).
     """
     spec = RolloutSpec(list(scenario), bool(steering), source, attrs)
@@ -350,7 +350,7 @@ def generate_file(
 
     `segments`: the script to run under the name `scenario_name` (default: that scenario of
     rollout.scenarios, or the protocol of that name of rollout.protocols); recorded in the
-    file's attrs["script"] (pimann.generate.rollouts.script_json).
+    file's attrs["script"] (pimann.core.rollout_files.script_json).
     """
     protocol = None
     if segments is not None:

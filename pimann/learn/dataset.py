@@ -37,7 +37,7 @@ class FeatureDataset:
     train_origin: np.ndarray  # (N, 2) clip index, step
     test_origin: np.ndarray
     # (N, 2) bool: left and right foot in contact at the sample's step (the data's own contact
-    # detection), for the diagnostics (pimann.learn.teacher_forcing); None when a clip has none
+    # detection), for the diagnostics (diagnostics.teacher_forcing); None when a clip has none
     train_contacts: np.ndarray | None = None
     test_contacts: np.ndarray | None = None
     # the training clips' standing pose (pimann.learn.standing), JSON; None: not recorded

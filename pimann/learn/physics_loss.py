@@ -7,10 +7,6 @@ sole pose (R, p) in the base frame, so it equals sum_j sdot_j [p_j x w_j; w_j], 
 joint twists written in the base frame at the base origin (p_j a point on joint j's axis, w_j
 its unit axis). It depends on the joints only: the base pose cancels, and enters the loss
 only through alpha (which sole is lower), which is not differentiated.
-
-`feet_motion` (L_F, a diagnostic of pimann.learn.teacher_forcing, not trained on) is the
-position-level counterpart: how far one frame's predicted joints move the other sole relative
-to the lower one while it is near the ground.
 """
 
 from __future__ import annotations
@@ -19,13 +15,7 @@ import torch
 from torch import nn
 
 from pimann.core.robot import LEFT_SOLE, RIGHT_SOLE, Robot
-from pimann.learn.kinematics_torch import TorchKinematics, rotation_vee
-
-
-def near_ground_weight(gap: torch.Tensor, height: float) -> torch.Tensor:
-    """How much a sole `gap` metres above the lower one counts as down: sigmoid((height - gap)
-    4 / height), 0.98 on the ground, 0.5 at the contact height, 0.02 at twice it."""
-    return torch.sigmoid((height - gap) * (4.0 / height))
+from pimann.learn.kinematics_torch import TorchKinematics
 
 
 class PhysicsInformedLoss(nn.Module):
@@ -108,41 +98,3 @@ class PhysicsInformedLoss(nn.Module):
         left = self.left_is_support(base_rpy, chain.frame_positions)
         foot = torch.where(left.unsqueeze(-1), feet[..., 0, :], feet[..., 1, :])
         return (twist + foot).square().mean(-1)
-
-    def feet_motion(
-        self,
-        previous_joints: torch.Tensor,
-        joints: torch.Tensor,
-        base_rpy: torch.Tensor,
-        dt: float,
-        height: float,
-    ) -> torch.Tensor:
-        """(...,) how fast the other sole moves relative to the lower one from one frame's
-        joints to the next, weighted by how near the ground it is.
-
-        Both soles still on the ground keep their relative pose: the other sole's pose in the
-        lower sole's frame, R_l^T (p_o - p_l) and R_l^T R_o, is the same at s_{i-1} and s_i.
-        Its change over dt (m/s, and rad/s by the small-angle vee of the relative rotation),
-        squared and averaged over the 6 components, is weighted by
-        sigmoid((height - gap) 4 / height), the gap the other sole's height above the lower
-        one at s_i (no gradient), `near_ground_weight`.
-        """
-        now, before = self.kinematics.chains(joints), self.kinematics.chains(previous_joints)
-        heights = self.sole_heights(base_rpy, now.frame_positions)
-        left = self.lower_is_left(heights).unsqueeze(-1)
-        weight = near_ground_weight((heights[..., 0] - heights[..., 1]).abs(), height)
-
-        def relative(chain):
-            p, r = chain.frame_positions, chain.frame_rotations
-            lower_p = torch.where(left, p[..., 0, :], p[..., 1, :])
-            other_p = torch.where(left, p[..., 1, :], p[..., 0, :])
-            lower_r = torch.where(left.unsqueeze(-1), r[..., 0, :, :], r[..., 1, :, :])
-            other_r = torch.where(left.unsqueeze(-1), r[..., 1, :, :], r[..., 0, :, :])
-            lower_t = lower_r.transpose(-1, -2)
-            return (lower_t @ (other_p - lower_p).unsqueeze(-1)).squeeze(-1), lower_t @ other_r
-
-        p1, r1 = relative(now)
-        p0, r0 = relative(before)
-        angle = rotation_vee(r0.transpose(-1, -2) @ r1)
-        rate = torch.cat((p1 - p0, angle), -1) / dt
-        return weight * rate.square().mean(-1)

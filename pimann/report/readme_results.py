@@ -1,7 +1,7 @@
 """The README's results at a glance: the block between `RESULTS_BEGIN` and `RESULTS_END` in
-README.md, rewritten by the report stage from results/metrics.json (pimann.key_metrics).
+README.md, rewritten by the report stage from results/metrics.json (pimann.report.key_metrics).
 
-Only the block changes, atomically (pimann.atomic); a rewrite from the same numbers is
+Only the block changes, atomically (pimann.core.atomic); a rewrite from the same numbers is
 byte-identical; a README without both markers, in order, is an error of one line. README.md
 is tracked by git, so it is a side effect of the report stage, not one of its DVC outs.
 """
