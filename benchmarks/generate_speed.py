@@ -58,9 +58,11 @@ def near_standing(layout) -> Normalisation:
     y_mean[layout.y_slices["joints"]] = STANDING_JOINTS
     y_mean[layout.y_slices["base_position"].start + 2] = STANDING_BASE_HEIGHT
     return Normalisation(
-        np.zeros(layout.input_dim), np.ones(layout.input_dim), y_mean,
+        np.zeros(layout.input_dim),
+        np.ones(layout.input_dim),
+        y_mean,
         np.full(layout.output_dim, 0.01),
-    )  # fmt: skip
+    )
 
 
 def clip_scripts(params, collection: Path | None, n_clips: int = N_CLIPS) -> tuple[list[list], str]:
@@ -97,9 +99,16 @@ def shortened(script: list, seconds: float) -> list:
 
 
 def sections(
-    model, layout, stats, params, robot, rows: int, steering: list[bool],
-    seconds: float = SECONDS, repeats: int | None = None,
-) -> None:  # fmt: skip
+    model,
+    layout,
+    stats,
+    params,
+    robot,
+    rows: int,
+    steering: list[bool],
+    seconds: float = SECONDS,
+    repeats: int | None = None,
+) -> None:
     """One line: microseconds per batch step by section; one 10-s rollout's amortised cost.
 
     `repeats`: passes, the fastest kept (None: 5 for one row, 2 up to 32, else 1)."""
@@ -112,9 +121,15 @@ def sections(
         timings: dict[str, float] = {}
         start = time.perf_counter()
         rollouts = generate_batch(
-            model, layout, stats, specs, params.rollout, robot,
-            contact_params=params.contacts, timings=timings,
-        )  # fmt: skip
+            model,
+            layout,
+            stats,
+            specs,
+            params.rollout,
+            robot,
+            contact_params=params.contacts,
+            timings=timings,
+        )
         wall = time.perf_counter() - start
         with tempfile.TemporaryDirectory() as folder:
             start = time.perf_counter()
@@ -129,10 +144,11 @@ def sections(
     label = f"{rows:4d} {'steered' if steering == [True] else ('plain' if rows == 1 else 'half')}"
     rollout_s = (wall + timings["write"]) / rows
     print(
-        f"{label:12s}" + "".join(f"{v:9.0f}" for v in per_step)
+        f"{label:12s}"
+        + "".join(f"{v:9.0f}" for v in per_step)
         + f"{1e6 * wall / steps:9.0f} {1e6 * wall / steps / rows:8.0f}"
         + f"{rollout_s:9.3f} s {seconds / rollout_s:6.0f}x"
-    )  # fmt: skip
+    )
 
 
 def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3) -> None:
@@ -148,8 +164,9 @@ def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3
     def one_at_a_time() -> None:
         for model in models:
             for script, steering in jobs:
-                generate_rollout(model, layout, stats, script, params.rollout, steering, robot,
-                                 **kwargs)  # fmt: skip
+                generate_rollout(
+                    model, layout, stats, script, params.rollout, steering, robot, **kwargs
+                )
 
     def batched() -> None:
         for model in models:
@@ -164,8 +181,10 @@ def full_set(params, layout, stats, robot, scripts: list[list], repeats: int = 3
             walls[name].append(time.perf_counter() - start)
     n = len(models) * len(jobs)
     generated = len(models) * frames / layout.rate_hz
-    print(f"full set: {n} rollouts ({len(models)} seeds x {len(scripts)} scripts x 2 steering), "
-          f"{generated:.0f} s generated; fastest of {repeats} alternating passes each")  # fmt: skip
+    print(
+        f"full set: {n} rollouts ({len(models)} seeds x {len(scripts)} scripts x 2 steering), "
+        f"{generated:.0f} s generated; fastest of {repeats} alternating passes each"
+    )
     for name, times in walls.items():
         wall = min(times)
         print(
@@ -187,13 +206,20 @@ def main(argv: list[str] | None = None) -> int:
     layout = window_layout(params.features, 50.0, "full")
     stats, robot = near_standing(layout), load_robot()
     model = random_model(params, layout, 0)
-    print(f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, 1 torch thread; "
-          f"MANN {layout.input_dim} -> {layout.output_dim}, {params.model.n_experts} experts, "
-          f"hidden {params.model.prediction_hidden}")  # fmt: skip
-    print(f"\nus per batch step by section; a {seconds:.0f}-s rollout ({seconds * 50:.0f} steps) "
-          "amortised over its batch (writing included)")  # fmt: skip
-    print(f"{'batch':12s}" + "".join(f"{n:>9s}" for n in (*SECTIONS, "record", "write"))
-          + f"{'step':>9s} {'per row':>8s}{'rollout':>11s} {'RTF':>6s}")  # fmt: skip
+    print(
+        f"{os.cpu_count()} cores, load average {os.getloadavg()[0]:.1f}, 1 torch thread; "
+        f"MANN {layout.input_dim} -> {layout.output_dim}, {params.model.n_experts} experts, "
+        f"hidden {params.model.prediction_hidden}"
+    )
+    print(
+        f"\nus per batch step by section; a {seconds:.0f}-s rollout ({seconds * 50:.0f} steps) "
+        "amortised over its batch (writing included)"
+    )
+    print(
+        f"{'batch':12s}"
+        + "".join(f"{n:>9s}" for n in (*SECTIONS, "record", "write"))
+        + f"{'step':>9s} {'per row':>8s}{'rollout':>11s} {'RTF':>6s}"
+    )
     repeats = 1 if args.smoke else None
     sections(model, layout, stats, params, robot, 1, [False], seconds, repeats)
     sections(model, layout, stats, params, robot, 1, [True], seconds, repeats)

@@ -53,9 +53,13 @@ PI_WEIGHT = 10.0
 
 
 def step_seconds(
-    params: Params, members: int, pi_weight: float, precision: str, device: torch.device,
+    params: Params,
+    members: int,
+    pi_weight: float,
+    precision: str,
+    device: torch.device,
     seconds: float,
-) -> float:  # fmt: skip
+) -> float:
     """Wall seconds of one training step (the best of 5 timed rounds after a warm-up)."""
     layout = window_layout(params.features, 50.0, "full")
     rng = np.random.default_rng(0)
@@ -130,18 +134,26 @@ def synthetic_dataset(path: Path, params: Params, clips: int = 6, frames: int = 
 
 
 def largest_training(
-    params: Params, dataset: Path, step_s: float, budget_s: float, device: torch.device,
-    precision: str, out: Path,
-) -> None:  # fmt: skip
+    params: Params,
+    dataset: Path,
+    step_s: float,
+    budget_s: float,
+    device: torch.device,
+    precision: str,
+    out: Path,
+) -> None:
     """Train the 5 seeds on every sample of `dataset` for the epochs that fit `budget_s`."""
     samples = len(read_dataset(dataset).x_train)
     epoch_s = math.ceil(samples / params.train.batch_size) * step_s
     # the test loss, the checkpoint and the start take their share: plan on 70% for steps
     epochs = max(1, min(params.train.epochs, int(0.7 * budget_s / epoch_s)))
     train = dataclasses.replace(
-        params.train, epochs=epochs, max_train_samples=None, precision=precision,
+        params.train,
+        epochs=epochs,
+        max_train_samples=None,
+        precision=precision,
         device=device.type,
-    )  # fmt: skip
+    )
     run = dataclasses.replace(params, train=train)
     print(
         f"training that fits {budget_s:.0f} s: 5 seeds, w={PI_WEIGHT:g}, {samples} samples, "
@@ -155,9 +167,13 @@ def largest_training(
 
 
 def sweep_epochs(
-    params: Params, dataset: Path, step_s: float, budget_s: float, device: torch.device,
+    params: Params,
+    dataset: Path,
+    step_s: float,
+    budget_s: float,
+    device: torch.device,
     precision: str,
-) -> None:  # fmt: skip
+) -> None:
     """The stages' sweep, eager and (on CUDA) graphed, each for the epochs that fit half of
     `budget_s`; wall seconds an epoch and the paper-size sweep projected from them."""
     samples = len(read_dataset(dataset).x_train)
@@ -167,13 +183,19 @@ def sweep_epochs(
     estimate = steps * step_s * members / len(SEEDS)  # eager: the 5-seed step, scaled
     epochs = max(1, min(params.train.epochs, int(0.35 * budget_s / estimate)))
     train = dataclasses.replace(
-        params.train, epochs=epochs, max_train_samples=None, precision=precision,
-        device=device.type, seeds=SEEDS,
-    )  # fmt: skip
+        params.train,
+        epochs=epochs,
+        max_train_samples=None,
+        precision=precision,
+        device=device.type,
+        seeds=SEEDS,
+    )
     run = dataclasses.replace(params, train=train)
     modes = [False] + ([True] if device.type == "cuda" else [])
-    print(f"the sweep as the stages train it: {members} models (w {weights} x seeds {SEEDS}), "
-          f"{samples} samples, {epochs} epochs, {precision}")  # fmt: skip
+    print(
+        f"the sweep as the stages train it: {members} models (w {weights} x seeds {SEEDS}), "
+        f"{samples} samples, {epochs} epochs, {precision}"
+    )
     per_epoch = {}
     for graph in modes:
         start = time.perf_counter()
@@ -227,8 +249,10 @@ def main(argv: list[str] | None = None) -> int:
             f"{sweep_hours(pi5, plain5, plain1, batch):.2f} h"
         )
     if bf16:
-        print(f"  bf16/float32 time of the 5-seed PI step: "
-              f"{times['bfloat16'][0] / times['float32'][0]:.2f}")  # fmt: skip
+        print(
+            f"  bf16/float32 time of the 5-seed PI step: "
+            f"{times['bfloat16'][0] / times['float32'][0]:.2f}"
+        )
     fastest = min(times, key=lambda p: times[p][0])
     with tempfile.TemporaryDirectory() as scratch:
         out = Path(scratch)

@@ -43,8 +43,9 @@ def _walk(mpc: CentroidalMPC, solves: int, params: MpcParams) -> list[MpcProblem
     com, velocity, angular = np.array([0.0, 0.0, 0.7]), np.zeros(3), np.zeros(3)
     problems = []
     for k in range(solves):
-        problem = horizon_problem(plan, nominal, k * params.dt, params, com, velocity, angular,
-                                  reference, SOLE_Z)  # fmt: skip
+        problem = horizon_problem(
+            plan, nominal, k * params.dt, params, com, velocity, angular, reference, SOLE_Z
+        )
         solution = mpc.solve(problem)
         problems.append(problem)
         com, velocity = solution.com[1], solution.com_velocity[1]
@@ -62,15 +63,20 @@ def _closed_loop(solver: str, steps: int = 2) -> tuple[float, float, float, bool
 
     params = load_params().simulate
     mpc = dataclasses.replace(params.mpc, solver=solver)
-    fast = dataclasses.replace(params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6,
-                               end_hold_s=0.3, mpc=mpc)  # fmt: skip
+    fast = dataclasses.replace(
+        params, speed_scale=1.0, step_scale=0.5, zmp_hold_s=0.6, end_hold_s=0.3, mpc=mpc
+    )
     robot = load_robot("simulation")
     feet = standing_feet(robot, standing_pose(robot, params))
     source = stepping_plan(feet, steps, 0.1, start=0.2, end=0.2)
     result = simulate_trajectory(stepping_trajectory(robot, fast, source), fast, None, "online")
     times = result.mpc_solve_s
-    return (result.real_time_factor, float(np.median(times)), float(np.quantile(times, 0.95)),
-            result.fallen)  # fmt: skip
+    return (
+        result.real_time_factor,
+        float(np.median(times)),
+        float(np.quantile(times, 0.95)),
+        result.fallen,
+    )
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -87,14 +93,18 @@ def main(argv: list[str] | None = None) -> int:
     solves = args.solves if args.solves is not None else 3 if args.smoke else 60
     chosen = args.solvers.split(",") if args.solvers else SOLVERS
     period = params.dt * 1e3
-    print(f"centroidal MPC: {knot_count(params)} knots of {period:.0f} ms, {solves} warm-started "
-          f"solves along a 4-step walk, period {period:.0f} ms, core {core}")  # fmt: skip
+    print(
+        f"centroidal MPC: {knot_count(params)} knots of {period:.0f} ms, {solves} warm-started "
+        f"solves along a 4-step walk, period {period:.0f} ms, core {core}"
+    )
     reference_mpc = CentroidalMPC(params, "ipopt")
     problems = _walk(reference_mpc, solves, params)
     reference_mpc.previous = None
-    header = (f"{'solver':<10} {'build s':>7} {'median ms':>9} {'p95 ms':>7} {'cpu med':>7} "
-              f"{'cpu p95':>7} {'p95<=T/2':>8} {'CoM vs ipopt':>12} "
-              f"{'f0 vs ipopt':>11}")  # fmt: skip
+    header = (
+        f"{'solver':<10} {'build s':>7} {'median ms':>9} {'p95 ms':>7} {'cpu med':>7} "
+        f"{'cpu p95':>7} {'p95<=T/2':>8} {'CoM vs ipopt':>12} "
+        f"{'f0 vs ipopt':>11}"
+    )
     if not args.smoke:
         header += f" {'loop RTF':>8} {'loop med':>8} {'loop p95':>8}  fell"
     print(header)
@@ -113,12 +123,16 @@ def main(argv: list[str] | None = None) -> int:
         wall = np.array([s.solve_s for s in solutions[1:]]) * 1e3  # the first is cold
         cpu = np.array([s.solve_cpu_s for s in solutions[1:]]) * 1e3
         com = max(np.abs(a.com - b.com).max() for a, b in zip(reference, solutions, strict=True))
-        first = max(np.abs(a.forces[:, :, 0] - b.forces[:, :, 0]).max()
-                    for a, b in zip(reference, solutions, strict=True))  # fmt: skip
+        first = max(
+            np.abs(a.forces[:, :, 0] - b.forces[:, :, 0]).max()
+            for a, b in zip(reference, solutions, strict=True)
+        )
         fits = "yes" if np.quantile(wall, 0.95) <= params.dt * 1e3 / 2 else "no"
-        line = (f"{name:<10} {build:>7.2f} {np.median(wall):>9.1f} {np.quantile(wall, 0.95):>7.1f} "
-                f"{np.median(cpu):>7.1f} {np.quantile(cpu, 0.95):>7.1f} {fits:>8} {com:>12.1e} "
-                f"{first:>11.1e}")  # fmt: skip
+        line = (
+            f"{name:<10} {build:>7.2f} {np.median(wall):>9.1f} {np.quantile(wall, 0.95):>7.1f} "
+            f"{np.median(cpu):>7.1f} {np.quantile(cpu, 0.95):>7.1f} {fits:>8} {com:>12.1e} "
+            f"{first:>11.1e}"
+        )
         if not args.smoke:
             rtf, median, p95, fallen = _closed_loop(name)
             line += f" {rtf:>7.2f}x {median * 1e3:>8.1f} {p95 * 1e3:>8.1f}  {fallen}"

@@ -78,9 +78,13 @@ def make_step(
             pi_prediction = prediction if pi_prediction is None else pi_prediction
             phys = pi_prediction * std + mean  # denormalised prediction, physical units
             pi = pi_loss(
-                phys[..., P], phys[..., PSI], phys[..., S], phys[..., V], phys[..., W],
+                phys[..., P],
+                phys[..., PSI],
+                phys[..., S],
+                phys[..., V],
+                phys[..., W],
                 phys[..., SDOT],
-            )  # fmt: skip
+            )
             loss = loss + pi_weight * pi.mean(-1).sum()
         optimiser.zero_grad(set_to_none=True)
         loss.backward()
@@ -218,10 +222,14 @@ def main(argv: list[str] | None = None) -> int:
     sweep += model_epochs / rates[1, 32][0] / 3600
     sweep_bf16 = sweep * rates[5, 32][1] / rates[5, 32][2]  # the PI steps' ratio for all
     print(f"projected, {EPOCHS} epochs x {SAMPLES} samples at batch 32, one process:")
-    print(f"  one model with the PI term: {single:.1f} h float32, "
-          f"{single * rates[1, 32][1] / rates[1, 32][2]:.1f} h bfloat16")  # fmt: skip
-    print(f"  26-model sweep (5-member ensembles + single baseline): {sweep:.1f} h float32, "
-          f"{sweep_bf16:.1f} h bfloat16")  # fmt: skip
+    print(
+        f"  one model with the PI term: {single:.1f} h float32, "
+        f"{single * rates[1, 32][1] / rates[1, 32][2]:.1f} h bfloat16"
+    )
+    print(
+        f"  26-model sweep (5-member ensembles + single baseline): {sweep:.1f} h float32, "
+        f"{sweep_bf16:.1f} h bfloat16"
+    )
     if device.type == "cpu":
         whole_machine(args.seconds, args.smoke)
     return 0

@@ -47,10 +47,16 @@ from pimann.learn.motion_classes import class_counts, majority_class
 
 HIGH_BAND_HZ = (6.0, 15.0)
 COLUMNS = [
-    "leg_step_high_share", "contact_tilt_deg", "contact_yaw_rate", "base_yaw_rate",
-    "leg_yaw_rate", "contact_horizontal_speed", "double_support_share", "stance_travel",
+    "leg_step_high_share",
+    "contact_tilt_deg",
+    "contact_yaw_rate",
+    "base_yaw_rate",
+    "leg_yaw_rate",
+    "contact_horizontal_speed",
+    "double_support_share",
+    "stance_travel",
     "swing_peak_height",
-]  # fmt: skip
+]
 
 
 def _rate(angles: np.ndarray, time: np.ndarray) -> np.ndarray:
@@ -77,11 +83,15 @@ def stance_and_swing(positions: np.ndarray, contact: np.ndarray) -> tuple[float,
     for foot in range(contact.shape[1]):
         steps = np.linalg.norm(np.diff(positions[:, foot, :2], axis=0), axis=1)
         travel += [steps[start : stop - 1].sum() for start, stop in true_runs(contact[:, foot])]
-        peaks += [positions[start:stop, foot, 2].max()
-                  for start, stop in true_runs(~contact[:, foot])
-                  if start > 0 and stop < len(contact)]  # fmt: skip
-    return (float(np.mean(travel)) if travel else float("nan"),
-            float(np.median(peaks)) if peaks else float("nan"))  # fmt: skip
+        peaks += [
+            positions[start:stop, foot, 2].max()
+            for start, stop in true_runs(~contact[:, foot])
+            if start > 0 and stop < len(contact)
+        ]
+    return (
+        float(np.mean(travel)) if travel else float("nan"),
+        float(np.median(peaks)) if peaks else float("nan"),
+    )
 
 
 def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str, float]:
@@ -109,7 +119,7 @@ def gait_shape(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str
         "double_support_share": float(contact.all(axis=1).mean()),
         "stance_travel": stance_travel,
         "swing_peak_height": swing_peak,
-    }  # fmt: skip
+    }
 
 
 def compare(

@@ -57,11 +57,13 @@ def clip_start(trajectory: Trajectory, seconds: float):
     velocity, yaw_rate = base_motion(trajectory)
     mid = len(trajectory.time) // 2
     name = CLASSES[classify(velocity[mid : mid + 1], yaw_rate[mid : mid + 1])[0]]
-    command = MotionSegment(seconds, float(velocity[mid, 0]), float(velocity[mid, 1]),
-                            float(yaw_rate[mid]))  # fmt: skip
+    command = MotionSegment(
+        seconds, float(velocity[mid, 0]), float(velocity[mid, 1]), float(yaw_rate[mid])
+    )
     rotation = Rotation.from_quat(trajectory.base_quaternion_xyzw[mid : mid + 1]).as_matrix()
-    pose = StandingPose(trajectory.joint_positions[mid].copy(), roll_pitch(rotation)[0],
-                        "mid-stride")  # fmt: skip
+    pose = StandingPose(
+        trajectory.joint_positions[mid].copy(), roll_pitch(rotation)[0], "mid-stride"
+    )
     joint_velocities = np.gradient(trajectory.joint_positions, trajectory.time, axis=0)[mid]
     return name, command, pose, joint_velocities
 
@@ -127,8 +129,14 @@ def sustainment(
     rows = []
     for seed, folder in model_seeds(models_dir).items():
         model, layout, stats, meta = load_model(folder)
-        roll = functools.partial(generate_batch, model, layout, stats, params=params.rollout,
-                                 contact_params=params.contacts)  # fmt: skip
+        roll = functools.partial(
+            generate_batch,
+            model,
+            layout,
+            stats,
+            params=params.rollout,
+            contact_params=params.contacts,
+        )
         # from standing: every clip's command in one batch; from mid-stride: one start each
         standing = StandingPose.from_json(meta.get("standing"))
         specs = [RolloutSpec([start[2]], steering) for start in starts]
@@ -136,10 +144,16 @@ def sustainment(
         for (clip, motion_class, command, pose, velocities), stand in zip(
             starts, from_stand, strict=True
         ):
-            (mid,) = roll([RolloutSpec([command], steering)], standing=pose,
-                          start_joint_velocities=velocities)  # fmt: skip
-            row = {"model": models_dir.name, "seed": seed, "clip": clip, "class": motion_class,
-                   "speed": float(np.hypot(command.vx, command.vy))}  # fmt: skip
+            (mid,) = roll(
+                [RolloutSpec([command], steering)], standing=pose, start_joint_velocities=velocities
+            )
+            row = {
+                "model": models_dir.name,
+                "seed": seed,
+                "clip": clip,
+                "class": motion_class,
+                "speed": float(np.hypot(command.vx, command.vy)),
+            }
             for start, rollout in (("mid", mid), ("stand", stand)):
                 ratio, count = achieved(rollout.trajectory, command)
                 row[f"ratio_{start}"], row[f"touchdowns_{start}"] = ratio, count
@@ -169,14 +183,17 @@ def main(argv: list[str] | None = None) -> int:
     if table is None:
         return 2
     summary = table.groupby(["model", "class"]).agg(
-        clips=("clip", "nunique"), speed=("speed", "median"),
-        ratio_mid=("ratio_mid", "median"), ratio_stand=("ratio_stand", "median"),
+        clips=("clip", "nunique"),
+        speed=("speed", "median"),
+        ratio_mid=("ratio_mid", "median"),
+        ratio_stand=("ratio_stand", "median"),
         touchdowns_mid=("touchdowns_mid", "median"),
         touchdowns_stand=("touchdowns_stand", "median"),
-        network_mid=("network_mid", "median"), network_stand=("network_stand", "median"),
+        network_mid=("network_mid", "median"),
+        network_stand=("network_stand", "median"),
         agreement_mid=("agreement_mid", "median"),
         agreement_stand=("agreement_stand", "median"),
-    )  # fmt: skip
+    )
     with pd.option_context("display.width", 160, "display.max_rows", 500):
         print(summary.round(2).to_string())
     return 0

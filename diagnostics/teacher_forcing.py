@@ -173,8 +173,9 @@ def feet_motion(
         motion = relative_sole_motion(
             loss.physics,
             *(torch.as_tensor(a, dtype=torch.float32) for a in (before, after, angles)),
-            dt=1.0 / layout.rate_hz, height=height,
-        )  # fmt: skip
+            dt=1.0 / layout.rate_hz,
+            height=height,
+        )
     return motion.numpy()
 
 
@@ -205,18 +206,31 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
             take = take.astype(int)
             train_contacts = dataset.train_contacts
             parts = {
-                "train": (dataset.x_train[take], dataset.y_train[take], dataset.train_origin[take],
-                          None if train_contacts is None else train_contacts[take]),
-                "test": (dataset.x_test, dataset.y_test, dataset.test_origin,
-                         dataset.test_contacts),
-            }  # fmt: skip
+                "train": (
+                    dataset.x_train[take],
+                    dataset.y_train[take],
+                    dataset.train_origin[take],
+                    None if train_contacts is None else train_contacts[take],
+                ),
+                "test": (
+                    dataset.x_test,
+                    dataset.y_test,
+                    dataset.test_origin,
+                    dataset.test_contacts,
+                ),
+            }
             classes = {
                 split: sample_classes(collection, dataset.clips, origin)
                 for split, (_, _, origin, _) in parts.items()
             }
             # the data's own leg shares, once per dataset: its stats are the models' own
-            loss = TrainingLoss(dataset.layout, dataset.stats, torch.device("cpu"),
-                                pi_configuration="predicted", pi_gradient="both")  # fmt: skip
+            loss = TrainingLoss(
+                dataset.layout,
+                dataset.stats,
+                torch.device("cpu"),
+                pi_configuration="predicted",
+                pi_gradient="both",
+            )
             leg_truths = {
                 split: contact_leg_velocity(loss, y, contacts)
                 for split, (_, y, _, contacts) in parts.items()
@@ -256,23 +270,35 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
                 if single.sum() >= 50:
                     true_leg, predicted_leg = leg_truth[single], leg_prediction[single]
                     leg = {
-                        "leg_true": true_leg.mean(), "leg_pred": predicted_leg.mean(),
+                        "leg_true": true_leg.mean(),
+                        "leg_pred": predicted_leg.mean(),
                         "leg_slope": _slope(true_leg, predicted_leg),
-                    }  # fmt: skip
-                rows.append({
-                    "model": models_dir.name, "seed": seed, "split": split, "class": name,
-                    "samples": int(mask.sum()),
-                    "vx_true": truth[mask, 0].mean(), "vx_pred": prediction[mask, 0].mean(),
-                    "vy_true": truth[mask, 1].mean(), "vy_pred": prediction[mask, 1].mean(),
-                    "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
-                    "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]), **leg,
-                    "leg_step_slope": _slope(step_truth[mask].ravel(),
-                                             step_prediction[mask].ravel()),
-                    "feet_true": feet_truths[split][mask].mean(),
-                    "feet_pred": feet_prediction[mask].mean(),
-                    "feet_sdot": feet_integrated[mask].mean(),
-                    "sdot_step_slope": _slope(step_truth[mask].ravel(), sdot_step[mask].ravel()),
-                })  # fmt: skip
+                    }
+                rows.append(
+                    {
+                        "model": models_dir.name,
+                        "seed": seed,
+                        "split": split,
+                        "class": name,
+                        "samples": int(mask.sum()),
+                        "vx_true": truth[mask, 0].mean(),
+                        "vx_pred": prediction[mask, 0].mean(),
+                        "vy_true": truth[mask, 1].mean(),
+                        "vy_pred": prediction[mask, 1].mean(),
+                        "vx_slope": _slope(truth[mask, 0], prediction[mask, 0]),
+                        "vy_slope": _slope(truth[mask, 1], prediction[mask, 1]),
+                        **leg,
+                        "leg_step_slope": _slope(
+                            step_truth[mask].ravel(), step_prediction[mask].ravel()
+                        ),
+                        "feet_true": feet_truths[split][mask].mean(),
+                        "feet_pred": feet_prediction[mask].mean(),
+                        "feet_sdot": feet_integrated[mask].mean(),
+                        "sdot_step_slope": _slope(
+                            step_truth[mask].ravel(), sdot_step[mask].ravel()
+                        ),
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -288,8 +314,12 @@ def model_folders(root: Path) -> list[Path]:
 
 
 def add_models_argument(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--models", type=Path, default=REPO_ROOT / "models",
-                        help="models/ or one training output in it, e.g. models/w10")  # fmt: skip
+    parser.add_argument(
+        "--models",
+        type=Path,
+        default=REPO_ROOT / "models",
+        help="models/ or one training output in it, e.g. models/w10",
+    )
 
 
 def table_over_models(

@@ -83,9 +83,15 @@ def forced_rollouts(
         return None
     rollout = dataclasses.replace(params.rollout, command_blend_tau=None)
     generator = BatchGenerator(
-        model, layout, stats, rollout, np.zeros(len(MODES), bool), load_robot(),
-        params.contacts, StandingPose.nominal(),
-    )  # fmt: skip
+        model,
+        layout,
+        stats,
+        rollout,
+        np.zeros(len(MODES), bool),
+        load_robot(),
+        params.contacts,
+        StandingPose.nominal(),
+    )
     xs = layout.x_slices
     columns = np.r_[xs["base_linear_window"], xs["base_angular_window"]]
     forced = np.array([mode == "windows" for mode in MODES])
@@ -98,8 +104,14 @@ def forced_rollouts(
     record = {name: [] for name in ("position", "rotation", "joints", "contacts")}
     with torch.inference_mode():
         for k in range(1, length + 1):
-            generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
-                           plan.changed[k], plan.active[k])  # fmt: skip
+            generator.step(
+                k,
+                plan.velocity[k],
+                plan.yaw_rate[k],
+                plan.stand[k],
+                plan.changed[k],
+                plan.active[k],
+            )
             for name, values in record.items():
                 values.append(np.array(getattr(generator, name)))
     arrays = {name: np.stack(values, axis=1) for name, values in record.items()}
@@ -113,16 +125,19 @@ def forced_rollouts(
             source=mode,
             rate_hz=layout.rate_hz,
             contacts=arrays["contacts"][row],
-        )  # fmt: skip
+        )
         for row, mode in enumerate(MODES)
     }
     frames = slice(int(steps[0]), int(steps[0]) + length)  # the frames generated
     out["data"] = Trajectory(
-        time=time, base_position=clip.base_position[frames],
+        time=time,
+        base_position=clip.base_position[frames],
         base_quaternion_xyzw=clip.base_quaternion_xyzw[frames],
-        joint_positions=clip.joint_positions[frames], source=clip.source, rate_hz=clip.rate_hz,
+        joint_positions=clip.joint_positions[frames],
+        source=clip.source,
+        rate_hz=clip.rate_hz,
         contacts=None if clip.contacts is None else clip.contacts[frames],
-    )  # fmt: skip
+    )
     return out
 
 
@@ -146,8 +161,10 @@ def window_forcing(
     models_dir: Path, collection: Path, params: Params, seconds: float
 ) -> pd.DataFrame:
     """One row per model seed, clip (held-out and training) and mode, plus the clip's own."""
-    splits = {"held_out": held_out_clips(collection, params),
-              "training": training_clips(collection, params)}  # fmt: skip
+    splits = {
+        "held_out": held_out_clips(collection, params),
+        "training": training_clips(collection, params),
+    }
     named = [(split, name, t) for split, clips in splits.items() for name, t in clips]
     from pimann.learn.model_files import load_model
 
@@ -158,8 +175,13 @@ def window_forcing(
             runs = forced_rollouts(model, layout, stats, trajectory, params, seconds)
             if runs is None:
                 continue
-            base = {"model": models_dir.name, "seed": seed, "split": split, "clip": name,
-                    "class": majority_class(class_counts(trajectory))}  # fmt: skip
+            base = {
+                "model": models_dir.name,
+                "seed": seed,
+                "split": split,
+                "clip": name,
+                "class": majority_class(class_counts(trajectory)),
+            }
             data = runs["data"]
             rows.append({**base, "mode": "data", **gait_measures(data, data)})
             for mode in MODES:
@@ -185,9 +207,11 @@ def main(argv: list[str] | None = None) -> int:
     if table is None:
         return 2
     summary = table.pivot_table(
-        index=["model", "split", "class"], columns="mode",
-        values=["speed_ratio", "touchdowns", "leg_rmse"], aggfunc="median",
-    )  # fmt: skip
+        index=["model", "split", "class"],
+        columns="mode",
+        values=["speed_ratio", "touchdowns", "leg_rmse"],
+        aggfunc="median",
+    )
     with pd.option_context("display.width", 200, "display.max_rows", 500):
         print(summary.round(2).to_string())
     return 0

@@ -75,14 +75,21 @@ def cmd_render(args: argparse.Namespace) -> None:
     _read_trajectory(args)  # bad input named by its file before any drawing
     skeleton = _skeleton(args) if args.mocap else None
     options = {
-        "strip_frames": args.frames, "strip_columns": args.columns, "frame_rate": args.fps,
-        "width": args.width, "height": args.height,
-    }  # fmt: skip
+        "strip_frames": args.frames,
+        "strip_columns": args.columns,
+        "frame_rate": args.fps,
+        "width": args.width,
+        "height": args.height,
+    }
     render_file(
-        args.file, args.output, group=args.group, mocap_path=args.mocap, skeleton=skeleton,
+        args.file,
+        args.output,
+        group=args.group,
+        mocap_path=args.mocap,
+        skeleton=skeleton,
         contacts=_params(args).contacts,
         **{k: v for k, v in options.items() if v is not None},
-    )  # fmt: skip
+    )
 
 
 def cmd_generate(args: argparse.Namespace) -> None:
@@ -136,10 +143,13 @@ def cmd_simulate(args: argparse.Namespace) -> None:
     )
     if args.video:
         render_simulation(
-            read_trajectory(args.output), args.video, params,
-            every_n_frames=params.video_every_n, width=params.video_width,
+            read_trajectory(args.output),
+            args.video,
+            params,
+            every_n_frames=params.video_every_n,
+            width=params.video_width,
             height=params.video_height,
-        )  # fmt: skip
+        )
     print(json.dumps(summary, indent=2))
 
 
@@ -222,16 +232,21 @@ def _parser() -> argparse.ArgumentParser:
     render.add_argument("--mocap", type=Path, help="the human motion to draw beside the robot")
     render.add_argument("--skeleton", help=SKELETON_HELP)
     render.add_argument(
-        "--frames", type=int, metavar="N", help="frames of a .png strip, evenly over the clip "
-        "(default 12)"
-    )  # fmt: skip
+        "--frames",
+        type=int,
+        metavar="N",
+        help="frames of a .png strip, evenly over the clip (default 12)",
+    )
     render.add_argument(
         "--columns", type=int, metavar="N", help="frames per row of a .png strip (default 4)"
     )
     render.add_argument(
-        "--fps", type=float, metavar="F", help="frames per second of the clip in a .gif or "
-        ".mp4, played in real time (default: every second sample)"
-    )  # fmt: skip
+        "--fps",
+        type=float,
+        metavar="F",
+        help="frames per second of the clip in a .gif or "
+        ".mp4, played in real time (default: every second sample)",
+    )
     render.add_argument(
         "--width", type=int, metavar="PX", help="of each frame (strip 480, animation 960)"
     )
@@ -241,9 +256,10 @@ def _parser() -> argparse.ArgumentParser:
 
     generate = add("generate", cmd_generate, "roll a trained model out on one scenario")
     generate.add_argument(
-        "model_dir", type=Path, help="a trained model's folder (model.pt, meta.json), e.g. "
-        "models/w10/0"
-    )  # fmt: skip
+        "model_dir",
+        type=Path,
+        help="a trained model's folder (model.pt, meta.json), e.g. models/w10/0",
+    )
     generate.add_argument(
         "--scenario", required=True, help=f"one of rollout.scenarios: {_scenario_names()}"
     )
@@ -265,16 +281,20 @@ def _parser() -> argparse.ArgumentParser:
 
     check = add("check-data", cmd_check_data, "the shared data against the data manifest")
     check.add_argument(
-        "--shared", type=Path, metavar="DIR", help="data folder (default: $PIMANN_SHARED, else "
-        "../shared)"
-    )  # fmt: skip
+        "--shared",
+        type=Path,
+        metavar="DIR",
+        help="data folder (default: $PIMANN_SHARED, else ../shared)",
+    )
     check.add_argument(
         "--manifest", type=Path, default=MANIFEST, help="default: the package's data_manifest.txt"
     )
     check.add_argument(
-        "--write-manifest", action="store_true", help="record the folder as it is now (the "
-        "robot models and every file of data.sources) instead of checking it"
-    )  # fmt: skip
+        "--write-manifest",
+        action="store_true",
+        help="record the folder as it is now (the "
+        "robot models and every file of data.sources) instead of checking it",
+    )
 
     metrics = add("metrics", cmd_metrics, "the paper's sliding metrics and drift as JSON")
     metrics.add_argument("file", type=Path, help=trajectory + " (a collection: every clip)")

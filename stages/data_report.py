@@ -38,8 +38,12 @@ def main(argv: list[str] | None = None) -> None:
     paths = [out.with_suffix(suffix) for suffix in (".json", ".md", ".png")]
     write_report(report, *paths, params.figures)
     # the table is the .md file (and the report page's section): not repeated in the log
-    log.info("profile %s: %s.{json,md,png} in %.0f s", params.profile, args.out,
-             time.perf_counter() - started)  # fmt: skip
+    log.info(
+        "profile %s: %s.{json,md,png} in %.0f s",
+        params.profile,
+        args.out,
+        time.perf_counter() - started,
+    )
 
 
 if __name__ == "__main__":

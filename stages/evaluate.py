@@ -33,9 +33,12 @@ def main(argv: list[str] | None = None) -> None:
     params = load_params()
     started = time.perf_counter()
     claims = evaluate_all(
-        REPO_ROOT / args.rollouts, REPO_ROOT / args.results, params, cpu_workers(args.workers),
+        REPO_ROOT / args.rollouts,
+        REPO_ROOT / args.results,
+        params,
+        cpu_workers(args.workers),
         args.data,
-    )  # fmt: skip
+    )
     by_status: dict[str, list[str]] = {}
     for claim in claims:  # one line each with -v; the statements are in claims.md
         log.debug("%s %s: %s", claim.id, claim.status, claim.claim)

@@ -33,9 +33,13 @@ def main(argv: list[str] | None = None) -> None:
         write_dataset(path, dataset)
         log.info(
             "%s: %d train samples (%d clips), %d test samples (%d clips) -> %s",
-            variant, len(dataset.x_train), len(dataset.train_clips),
-            len(dataset.x_test), len(dataset.test_clips), path,
-        )  # fmt: skip
+            variant,
+            len(dataset.x_train),
+            len(dataset.train_clips),
+            len(dataset.x_test),
+            len(dataset.test_clips),
+            path,
+        )
 
 
 if __name__ == "__main__":

@@ -36,9 +36,12 @@ def main(argv: list[str] | None = None) -> None:
     write_dataset(path, dataset)  # type: ignore[arg-type]
     log.info(
         "adherent: %d train samples (%d clips), %d test samples (%d clips) -> %s",
-        len(dataset.x_train), len(dataset.train_clips), len(dataset.x_test),
-        len(dataset.test_clips), path,
-    )  # fmt: skip
+        len(dataset.x_train),
+        len(dataset.train_clips),
+        len(dataset.x_test),
+        len(dataset.test_clips),
+        path,
+    )
 
 
 if __name__ == "__main__":

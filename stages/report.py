@@ -39,8 +39,13 @@ def main(argv: list[str] | None = None) -> None:
         write_readme_results(readme, json.loads(metrics.read_text()))
     else:
         log.warning("no %s: its results block is not rewritten", readme)
-    log.info("%s, %s (%.1f MB) in %.1f s", metrics, report, report.stat().st_size / 1e6,
-             time.perf_counter() - started)  # fmt: skip
+    log.info(
+        "%s, %s (%.1f MB) in %.1f s",
+        metrics,
+        report,
+        report.stat().st_size / 1e6,
+        time.perf_counter() - started,
+    )
 
 
 if __name__ == "__main__":

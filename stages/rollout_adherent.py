@@ -38,8 +38,13 @@ def main(argv: list[str] | None = None) -> None:
     written = run_adherent_rollouts(
         REPO_ROOT / args.models, REPO_ROOT / args.out, params, cpu_workers(args.workers)
     )
-    log.info("profile %s: %d rollouts -> %s in %.0f s", params.profile, len(written),
-             args.out, time.perf_counter() - started)  # fmt: skip
+    log.info(
+        "profile %s: %d rollouts -> %s in %.0f s",
+        params.profile,
+        len(written),
+        args.out,
+        time.perf_counter() - started,
+    )
 
 
 if __name__ == "__main__":

@@ -39,8 +39,13 @@ def main(argv: list[str] | None = None) -> None:
     record = simulate_runs(
         REPO_ROOT / args.rollouts, REPO_ROOT / args.out, REPO_ROOT / args.summary, params
     )
-    log.info("profile %s: %d runs -> %s in %.0f s", params.profile, len(record["runs"]),
-             args.out, time.perf_counter() - started)  # fmt: skip
+    log.info(
+        "profile %s: %d runs -> %s in %.0f s",
+        params.profile,
+        len(record["runs"]),
+        args.out,
+        time.perf_counter() - started,
+    )
 
 
 if __name__ == "__main__":

@@ -43,28 +43,44 @@ def main(argv: list[str] | None = None) -> None:
     device = pick_device(params.train.device)
     log.info(
         "profile %s: %s, w=%g, seeds %s, %d epochs on %s, data %s",
-        params.profile, args.out.name, args.pi_weight, params.train.seeds, params.train.epochs,
-        device, dataset,
-    )  # fmt: skip
+        params.profile,
+        args.out.name,
+        args.pi_weight,
+        params.train.seeds,
+        params.train.epochs,
+        device,
+        dataset,
+    )
     started = time.perf_counter()
     if uses_sweep(device):
         in_sweep = args.variant == "full" and args.pi_weight in params.train.pi_weights
         sweep = params.train.pi_weights if in_sweep else [args.pi_weight]
         metas = train_from_sweep(
-            dataset, REPO_ROOT / args.out, args.pi_weight, sweep, params, device,
+            dataset,
+            REPO_ROOT / args.out,
+            args.pi_weight,
+            sweep,
+            params,
+            device,
             plots_dir=REPO_ROOT / args.plots,
-        )  # fmt: skip
+        )
     else:
         metas = train_models(
-            dataset, REPO_ROOT / args.out, args.pi_weight, params.train.seeds, params,
-            device, plots_dir=REPO_ROOT / args.plots,
-        )  # fmt: skip
+            dataset,
+            REPO_ROOT / args.out,
+            args.pi_weight,
+            params.train.seeds,
+            params,
+            device,
+            plots_dir=REPO_ROOT / args.plots,
+        )
     best = ", ".join(
         f"{seed}: {meta['best_epoch']} ({meta['best_test_loss']:.5f})"
         for seed, meta in metas.items()
     )
-    log.info("trained in %.0f s; best epoch (test loss) of seed %s", time.perf_counter() - started,
-             best)  # fmt: skip
+    log.info(
+        "trained in %.0f s; best epoch (test loss) of seed %s", time.perf_counter() - started, best
+    )
 
 
 if __name__ == "__main__":

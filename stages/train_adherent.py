@@ -38,16 +38,24 @@ def main(argv: list[str] | None = None) -> None:
     dataset = REPO_ROOT / params.features.output_dir / DATASET
     threads = training_threads(params.train.threads)
     torch.set_num_threads(threads)
-    log.info("profile %s: adherent, seeds %s, %d epochs, %d thread(s), data %s", params.profile,
-             params.train.seeds, params.train.epochs, threads, dataset)  # fmt: skip
+    log.info(
+        "profile %s: adherent, seeds %s, %d epochs, %d thread(s), data %s",
+        params.profile,
+        params.train.seeds,
+        params.train.epochs,
+        threads,
+        dataset,
+    )
     started = time.perf_counter()
     metas = train_adherent(
         dataset, REPO_ROOT / args.out, params.train.seeds, params, REPO_ROOT / args.plots
     )
-    best = ", ".join(f"{seed}: {m['best_epoch']} ({m['best_test_loss']:.5f})"
-                     for seed, m in metas.items())  # fmt: skip
-    log.info("trained in %.0f s; best epoch (test loss) of seed %s",
-             time.perf_counter() - started, best)  # fmt: skip
+    best = ", ".join(
+        f"{seed}: {m['best_epoch']} ({m['best_test_loss']:.5f})" for seed, m in metas.items()
+    )
+    log.info(
+        "trained in %.0f s; best epoch (test loss) of seed %s", time.perf_counter() - started, best
+    )
 
 
 if __name__ == "__main__":

@@ -221,43 +221,91 @@ WEIGHTS = {BASELINE: 0.0, "w0": 0.0, "w1": 1.0, "w10": 10.0, "w20": 20.0, "w100"
 SCENARIO = "authors"  # evaluate.scenario: the authors' test protocol
 # seed medians of a study that agrees with the paper
 AGREEING = {
-    "support_rmse_paper_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9,
-                                        "w100": 15},
-    "support_rmse_paper_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5,
-                                         "w100": 9},
+    "support_rmse_paper_linear_total": {
+        BASELINE: 20,
+        "w0": 12,
+        "w1": 10,
+        "w10": 8,
+        "w20": 9,
+        "w100": 15,
+    },
+    "support_rmse_paper_angular_total": {
+        BASELINE: 18,
+        "w0": 6,
+        "w1": 5,
+        "w10": 4,
+        "w20": 4.5,
+        "w100": 9,
+    },
     "support_rmse_linear_total": {BASELINE: 20, "w0": 12, "w1": 10, "w10": 8, "w20": 9, "w100": 15},
     "support_rmse_angular_total": {BASELINE: 18, "w0": 6, "w1": 5, "w10": 4, "w20": 4.5, "w100": 9},
-    "support_rmse_linear_world_total": {BASELINE: 24, "w0": 14, "w1": 12, "w10": 9, "w20": 10,
-                                        "w100": 17},
-    "support_rmse_linear_position_total": {BASELINE: 15, "w0": 9, "w1": 8, "w10": 6, "w20": 7,
-                                           "w100": 12},
-    "contact_sole_pitch_max_abs": {BASELINE: 0.1, "w0": 0.05, "w1": 0.06, "w10": 0.08,
-                                   "w20": 0.09, "w100": 0.3},
-    "contact_foot_speed_mean": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1, "w20": 0.1,
-                                "w100": 0.2},
-    "contact_foot_speed_mean_position": {BASELINE: 0.3, "w0": 0.2, "w1": 0.15, "w10": 0.1,
-                                         "w20": 0.1, "w100": 0.2},
-}  # fmt: skip
+    "support_rmse_linear_world_total": {
+        BASELINE: 24,
+        "w0": 14,
+        "w1": 12,
+        "w10": 9,
+        "w20": 10,
+        "w100": 17,
+    },
+    "support_rmse_linear_position_total": {
+        BASELINE: 15,
+        "w0": 9,
+        "w1": 8,
+        "w10": 6,
+        "w20": 7,
+        "w100": 12,
+    },
+    "contact_sole_pitch_max_abs": {
+        BASELINE: 0.1,
+        "w0": 0.05,
+        "w1": 0.06,
+        "w10": 0.08,
+        "w20": 0.09,
+        "w100": 0.3,
+    },
+    "contact_foot_speed_mean": {
+        BASELINE: 0.3,
+        "w0": 0.2,
+        "w1": 0.15,
+        "w10": 0.1,
+        "w20": 0.1,
+        "w100": 0.2,
+    },
+    "contact_foot_speed_mean_position": {
+        BASELINE: 0.3,
+        "w0": 0.2,
+        "w1": 0.15,
+        "w10": 0.1,
+        "w20": 0.1,
+        "w100": 0.2,
+    },
+}
 
 
 REFERENCE = {
-    "label": "data (retargeted, forward walking)", "frames": 500, "min_forward_frames": 250,
+    "label": "data (retargeted, forward walking)",
+    "frames": 500,
+    "min_forward_frames": 250,
     "joint_velocities": "differences",
-    "all": {"clips": 82, "used": 16, "metrics": {
-        "support_rmse_paper_linear_total": {"median": 30.5},
-        "support_rmse_paper_angular_total": {"median": 11.2},
-        "support_rmse_contact_point_total": {"median": 12.5},
-        "support_rmse_linear_total": {"median": 12.0},
-        "support_rmse_linear_world_total": {"median": 13.2},
-        "support_rmse_angular_total": {"median": 2.44},
-        "support_rmse_linear_position_total": {"median": 12.0},
-        "support_rmse_linear_position_world_total": {"median": 13.2},
-        "support_rmse_angular_position_total": {"median": 2.44},
-        "support_rmse_linear_position_liftoff_share": {"median": 0.31},
-        "contact_liftoff_frames_share": {"median": 0.18},
-    }},
+    "all": {
+        "clips": 82,
+        "used": 16,
+        "metrics": {
+            "support_rmse_paper_linear_total": {"median": 30.5},
+            "support_rmse_paper_angular_total": {"median": 11.2},
+            "support_rmse_contact_point_total": {"median": 12.5},
+            "support_rmse_linear_total": {"median": 12.0},
+            "support_rmse_linear_world_total": {"median": 13.2},
+            "support_rmse_angular_total": {"median": 2.44},
+            "support_rmse_linear_position_total": {"median": 12.0},
+            "support_rmse_linear_position_world_total": {"median": 13.2},
+            "support_rmse_angular_position_total": {"median": 2.44},
+            "support_rmse_linear_position_liftoff_share": {"median": 0.31},
+            "contact_liftoff_frames_share": {"median": 0.18},
+        },
+    },
     "test": {"clips": 6, "used": 0, "metrics": {}},
-}  # fmt: skip
+}
 
 
 def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFrame:
@@ -268,10 +316,14 @@ def crafted_metrics(values: dict = AGREEING, seeds=(0, 1, 2, 3, 4)) -> pd.DataFr
             for steering in (False, True):
                 offset = 1.0 + 0.01 * (seed - 2)
                 row = {
-                    "model": model, "variant": "ground_projected" if model == BASELINE else "full",
-                    "pi_weight": weight, "seed": seed, "scenario": SCENARIO,
-                    "steering": steering, "rollout": f"{model}/{seed}/{SCENARIO}.h5",
-                }  # fmt: skip
+                    "model": model,
+                    "variant": "ground_projected" if model == BASELINE else "full",
+                    "pi_weight": weight,
+                    "seed": seed,
+                    "scenario": SCENARIO,
+                    "steering": steering,
+                    "rollout": f"{model}/{seed}/{SCENARIO}.h5",
+                }
                 for metric, by_model in values.items():
                     row[metric] = by_model[model] * offset
                 unsteered_pi = model != BASELINE and not steering
@@ -301,9 +353,14 @@ def benchmark_collection(path):
 
 
 SMALL_MODEL = ModelParams(
-    n_experts=2, gating_hidden=8, gating_layers=3, prediction_hidden=32, prediction_layers=3,
-    dropout=0.3, activation="elu",
-)  # fmt: skip
+    n_experts=2,
+    gating_hidden=8,
+    gating_layers=3,
+    prediction_hidden=32,
+    prediction_layers=3,
+    dropout=0.3,
+    activation="elu",
+)
 
 
 def _weights(directory) -> dict[str, torch.Tensor]:
@@ -316,8 +373,13 @@ def save_small_model(directory: Path) -> Path:
     n_in, n_out = layout.input_dim, layout.output_dim
     stats = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
     model = MANN(n_in, n_out, SMALL_MODEL, seeds=[3])
-    meta = {"pi_weight": 1.0, "seed": 3, "variant": "full", "standing": None,
-            "params": {"model": dataclasses.asdict(SMALL_MODEL)}}  # fmt: skip
+    meta = {
+        "pi_weight": 1.0,
+        "seed": 3,
+        "variant": "full",
+        "standing": None,
+        "params": {"model": dataclasses.asdict(SMALL_MODEL)},
+    }
     save_model(directory, model, layout, stats, meta)
     return directory
 
@@ -368,37 +430,66 @@ def _first_weight(blob: dict) -> torch.Tensor:
 BROKEN_MODELS = {
     "absent": ("model.pt", _file("model.pt"), "no trained model here"),
     "empty": ("model.pt", _model(b""), "empty or cut short"),
-    "truncated": ("model.pt", _file("model.pt", lambda data: data[:900]),
-                  "not a PyTorch checkpoint"),
+    "truncated": (
+        "model.pt",
+        _file("model.pt", lambda data: data[:900]),
+        "not a PyTorch checkpoint",
+    ),
     "text": ("model.pt", _model(b"weights: 1 2 3\n"), "not a PyTorch checkpoint"),
     "pickle": ("model.pt", _model(pickle.dumps({"state_dict": {}})), "not a PyTorch checkpoint"),
     "list": ("model.pt", _model(_torch_bytes([1, 2])), "holds a list, not a trained model"),
     "lacks_stats": ("model.pt", _blob(lambda b: b.pop("stats")), r"lacks \['stats'\]"),
-    "lacks_weight": ("model.pt", _blob(lambda b: b["state_dict"].pop("expert_bias_0")),
-                     r"state_dict does not fit model_params: lacks \['expert_bias_0'\]"),
-    "wrong_shape": ("model.pt",
-                    _blob(lambda b: b["state_dict"].update(expert_weight_0=torch.zeros(2, 3))),
-                    r"state_dict\['expert_weight_0'\] is \(2, 3\), the model needs"),
-    "other_network": ("model.pt", _blob(lambda b: b["model_params"].update(n_experts=3)),
-                      "state_dict.* the model needs"),
-    "model_params": ("model.pt", _blob(lambda b: b["model_params"].update(depth=3)),
-                     "model_params: .*'depth'"),
-    "nan": ("model.pt", _blob(lambda b: _first_weight(b)[0, 1].fill_(float("nan"))),
-            r"state_dict\['expert_weight_0'\] holds NaN"),
-    "nan_stats": ("model.pt", _blob(lambda b: b["stats"]["y_std"][4].fill_(float("inf"))),
-                  r"stats\['y_std'\] holds NaN"),
-    "stats_shape": ("model.pt", _blob(lambda b: b["stats"].update(x_mean=torch.zeros(5))),
-                    r"stats\['x_mean'\] is \(5,\)"),
-    "layout_not_json": ("model.pt", _blob(lambda b: b.update(layout="{offsets")),
-                        "layout: not a feature layout"),
-    "layout_dims": ("model.pt", _blob(lambda b: b.update(input_dim=b["input_dim"] - 1)),
-                    "do not fit the layout's"),
+    "lacks_weight": (
+        "model.pt",
+        _blob(lambda b: b["state_dict"].pop("expert_bias_0")),
+        r"state_dict does not fit model_params: lacks \['expert_bias_0'\]",
+    ),
+    "wrong_shape": (
+        "model.pt",
+        _blob(lambda b: b["state_dict"].update(expert_weight_0=torch.zeros(2, 3))),
+        r"state_dict\['expert_weight_0'\] is \(2, 3\), the model needs",
+    ),
+    "other_network": (
+        "model.pt",
+        _blob(lambda b: b["model_params"].update(n_experts=3)),
+        "state_dict.* the model needs",
+    ),
+    "model_params": (
+        "model.pt",
+        _blob(lambda b: b["model_params"].update(depth=3)),
+        "model_params: .*'depth'",
+    ),
+    "nan": (
+        "model.pt",
+        _blob(lambda b: _first_weight(b)[0, 1].fill_(float("nan"))),
+        r"state_dict\['expert_weight_0'\] holds NaN",
+    ),
+    "nan_stats": (
+        "model.pt",
+        _blob(lambda b: b["stats"]["y_std"][4].fill_(float("inf"))),
+        r"stats\['y_std'\] holds NaN",
+    ),
+    "stats_shape": (
+        "model.pt",
+        _blob(lambda b: b["stats"].update(x_mean=torch.zeros(5))),
+        r"stats\['x_mean'\] is \(5,\)",
+    ),
+    "layout_not_json": (
+        "model.pt",
+        _blob(lambda b: b.update(layout="{offsets")),
+        "layout: not a feature layout",
+    ),
+    "layout_dims": (
+        "model.pt",
+        _blob(lambda b: b.update(input_dim=b["input_dim"] - 1)),
+        "do not fit the layout's",
+    ),
     "meta_absent": ("meta.json", _file("meta.json"), "cannot read the model's metadata"),
     "meta_not_json": ("meta.json", _meta(b"{seed: 3"), "not JSON"),
     "meta_binary": ("meta.json", _meta(b"\xff\xfe\x00"), "not JSON"),
     "meta_no_seed": ("meta.json", _meta(b'{"pi_weight": 1.0}'), "no integer 'seed'"),
     "meta_list": ("meta.json", _meta(b"[3]"), "no integer 'seed'"),
-}  # fmt: skip
+}
 
 
 def break_model(folder: Path, kind: str) -> tuple[Path, str]:
@@ -418,42 +509,84 @@ def crafted_rows() -> pd.DataFrame:
                 speed = 0.78 if good else 0.4 + 0.05 * seed
                 common = {"model": model, "pi_weight": weight, "steering": steering, "seed": seed}
                 for k in range(2):  # two forward segments per seed, averaged first
-                    rows.append({
-                        **common, "segment": k, "class": "forward", "stand": False,
-                        "cmd_speed": 0.8, "speed_along": speed + 0.02 * k,
-                        "speed_ratio": (speed + 0.02 * k) / 0.8, "cmd_yaw_rate": 0.0,
-                        "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                        "heading_error_max_deg": 3.0 if good else 12.0 + seed,
-                        "heading_error_final_deg": -3.0 if good else 12.0,
-                        "alternates": good or seed == 0, "sliding_linear": 10.0 + seed,
-                        "sliding_linear_position": 6.0 + seed,
-                        "sliding_angular": 5.0, "base_travel_m": np.nan,
-                        "base_travel_limit_m": np.nan, "foot_speed_max": np.nan,
-                        "roll_drift_deg": 1.0, "pitch_drift_deg": -2.0 if good else -7.0,
-                        "foot_pitch_drift_deg": np.nan,
-                    })  # fmt: skip
-                rows.append({
-                    **common, "segment": 2, "class": "turning_in_place", "stand": False,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.5, "yaw_rate": 0.45, "yaw_rate_ratio": 0.9,
-                    "heading_error_max_deg": 4.0, "heading_error_final_deg": 4.0,
-                    "alternates": True, "sliding_linear": 1.0, "sliding_angular": 8.0,
-                    "sliding_linear_position": 1.0,
-                    "base_travel_m": np.nan, "base_travel_limit_m": np.nan,
-                    "foot_speed_max": np.nan, "roll_drift_deg": 0.5, "pitch_drift_deg": 0.5,
-                    "foot_pitch_drift_deg": 0.5,
-                })  # fmt: skip
-                rows.append({
-                    **common, "segment": 3, "class": "standing", "stand": True,
-                    "cmd_speed": 0.0, "speed_along": np.nan, "speed_ratio": np.nan,
-                    "cmd_yaw_rate": 0.0, "yaw_rate": 0.0, "yaw_rate_ratio": np.nan,
-                    "heading_error_max_deg": 0.5, "heading_error_final_deg": 0.5,
-                    "alternates": True, "sliding_linear": 0.0, "sliding_angular": 0.0,
-                    "sliding_linear_position": 0.0,
-                    "base_travel_m": 0.02 if good else 0.2, "base_travel_limit_m": 0.04,
-                    "foot_speed_max": 0.01, "roll_drift_deg": 0.1, "pitch_drift_deg": 0.1,
-                    "foot_pitch_drift_deg": 0.1,
-                })  # fmt: skip
+                    rows.append(
+                        {
+                            **common,
+                            "segment": k,
+                            "class": "forward",
+                            "stand": False,
+                            "cmd_speed": 0.8,
+                            "speed_along": speed + 0.02 * k,
+                            "speed_ratio": (speed + 0.02 * k) / 0.8,
+                            "cmd_yaw_rate": 0.0,
+                            "yaw_rate": 0.0,
+                            "yaw_rate_ratio": np.nan,
+                            "heading_error_max_deg": 3.0 if good else 12.0 + seed,
+                            "heading_error_final_deg": -3.0 if good else 12.0,
+                            "alternates": good or seed == 0,
+                            "sliding_linear": 10.0 + seed,
+                            "sliding_linear_position": 6.0 + seed,
+                            "sliding_angular": 5.0,
+                            "base_travel_m": np.nan,
+                            "base_travel_limit_m": np.nan,
+                            "foot_speed_max": np.nan,
+                            "roll_drift_deg": 1.0,
+                            "pitch_drift_deg": -2.0 if good else -7.0,
+                            "foot_pitch_drift_deg": np.nan,
+                        }
+                    )
+                rows.append(
+                    {
+                        **common,
+                        "segment": 2,
+                        "class": "turning_in_place",
+                        "stand": False,
+                        "cmd_speed": 0.0,
+                        "speed_along": np.nan,
+                        "speed_ratio": np.nan,
+                        "cmd_yaw_rate": 0.5,
+                        "yaw_rate": 0.45,
+                        "yaw_rate_ratio": 0.9,
+                        "heading_error_max_deg": 4.0,
+                        "heading_error_final_deg": 4.0,
+                        "alternates": True,
+                        "sliding_linear": 1.0,
+                        "sliding_angular": 8.0,
+                        "sliding_linear_position": 1.0,
+                        "base_travel_m": np.nan,
+                        "base_travel_limit_m": np.nan,
+                        "foot_speed_max": np.nan,
+                        "roll_drift_deg": 0.5,
+                        "pitch_drift_deg": 0.5,
+                        "foot_pitch_drift_deg": 0.5,
+                    }
+                )
+                rows.append(
+                    {
+                        **common,
+                        "segment": 3,
+                        "class": "standing",
+                        "stand": True,
+                        "cmd_speed": 0.0,
+                        "speed_along": np.nan,
+                        "speed_ratio": np.nan,
+                        "cmd_yaw_rate": 0.0,
+                        "yaw_rate": 0.0,
+                        "yaw_rate_ratio": np.nan,
+                        "heading_error_max_deg": 0.5,
+                        "heading_error_final_deg": 0.5,
+                        "alternates": True,
+                        "sliding_linear": 0.0,
+                        "sliding_angular": 0.0,
+                        "sliding_linear_position": 0.0,
+                        "base_travel_m": 0.02 if good else 0.2,
+                        "base_travel_limit_m": 0.04,
+                        "foot_speed_max": 0.01,
+                        "roll_drift_deg": 0.1,
+                        "pitch_drift_deg": 0.1,
+                        "foot_pitch_drift_deg": 0.1,
+                    }
+                )
     return pd.DataFrame(rows)
 
 
@@ -472,21 +605,29 @@ def crafted_results(root, params, profile: str = "quick", sim: bool = True, data
     (root / "timeseries").mkdir()
     for k, name in enumerate(("base_baseline", "base_pi", "base_pi_steering")):
         pd.DataFrame(
-            {"time": t, "base_x": 0.4 * t, "base_y": 0.02 * k * t, "base_z": 0.01 * np.sin(t),
-             "base_roll": 0.01 * np.sin(3 * t), "base_pitch": 0.02 * np.cos(3 * t),
-             "base_yaw": 0.01 * k * t}
-        ).to_csv(root / "timeseries" / f"{name}.csv", index=False)  # fmt: skip
+            {
+                "time": t,
+                "base_x": 0.4 * t,
+                "base_y": 0.02 * k * t,
+                "base_z": 0.01 * np.sin(t),
+                "base_roll": 0.01 * np.sin(3 * t),
+                "base_pitch": 0.02 * np.cos(3 * t),
+                "base_yaw": 0.01 * k * t,
+            }
+        ).to_csv(root / "timeseries" / f"{name}.csv", index=False)
     for w in (0, 1, 10, 20, 100):
         phase = 2 * np.pi * t
         pd.DataFrame(
-            {"time": t,
-             "left_foot_height": np.maximum(0, 0.05 * np.sin(phase)),
-             "right_foot_height": np.maximum(0, -0.05 * np.sin(phase)),
-             "left_sole_pitch": 0.002 * w * np.sin(phase),
-             "right_sole_pitch": -0.002 * w * np.sin(phase),
-             "left_contact": (np.sin(phase) <= 0).astype(int),
-             "right_contact": (np.sin(phase) >= 0).astype(int)}
-        ).to_csv(root / "timeseries" / f"feet_w{w}.csv", index=False)  # fmt: skip
+            {
+                "time": t,
+                "left_foot_height": np.maximum(0, 0.05 * np.sin(phase)),
+                "right_foot_height": np.maximum(0, -0.05 * np.sin(phase)),
+                "left_sole_pitch": 0.002 * w * np.sin(phase),
+                "right_sole_pitch": -0.002 * w * np.sin(phase),
+                "left_contact": (np.sin(phase) <= 0).astype(int),
+                "right_contact": (np.sin(phase) >= 0).astype(int),
+            }
+        ).to_csv(root / "timeseries" / f"feet_w{w}.csv", index=False)
     if sim:
         (root / "sim").mkdir()
         with h5py.File(root / "sim" / "mixed.h5", "w") as file:
@@ -536,9 +677,13 @@ def synthetic_collection(n_sources: int = 6, frames: int = 160) -> list[tuple[st
         for mirrored in (False, True):
             name = f"src{k}" + ("_mirror" if mirrored else "")
             clip = synthetic_clip(
-                frames, velocity=(0.2 + 0.1 * k, 0.0, 0.0), yaw_rate=0.1 * (k - 2),
-                source=f"src{k}", mirrored=mirrored, phase=float(mirrored) + k,
-            )  # fmt: skip
+                frames,
+                velocity=(0.2 + 0.1 * k, 0.0, 0.0),
+                yaw_rate=0.1 * (k - 2),
+                source=f"src{k}",
+                mirrored=mirrored,
+                phase=float(mirrored) + k,
+            )
             clips.append((name, clip))
     return clips
 
@@ -692,10 +837,19 @@ def tiny_models(root, weight: float, variant: str, seeds):
         torch.manual_seed(seed)
         model = MANN(layout.input_dim, layout.output_dim, small, seeds=[seed])
         stats = Normalisation(
-            np.zeros(layout.input_dim), np.ones(layout.input_dim),
-            np.zeros(layout.output_dim), 0.01 * np.ones(layout.output_dim),
-        )  # fmt: skip
-        meta = {"pi_weight": weight, "seed": seed, "variant": variant, "epochs": 3,
-                "best_epoch": 2, "train_clips": ["a", "b"], "test_clips": ["c"],
-                "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
+            np.zeros(layout.input_dim),
+            np.ones(layout.input_dim),
+            np.zeros(layout.output_dim),
+            0.01 * np.ones(layout.output_dim),
+        )
+        meta = {
+            "pi_weight": weight,
+            "seed": seed,
+            "variant": variant,
+            "epochs": 3,
+            "best_epoch": 2,
+            "train_clips": ["a", "b"],
+            "test_clips": ["c"],
+            "params": {"model": dataclasses.asdict(small)},
+        }
         save_model(root / str(seed), model, layout, stats, meta)

@@ -79,10 +79,13 @@ def test_features_match_a_closed_form(robot, frames):
     joints = np.tile(STANDING_JOINTS, (n, 1))
     joints[:, :12] += swing[:, None]  # the legs only: the chest keeps its place on the base
     clip = Trajectory(
-        time=t, base_position=np.column_stack([1.0 + v[0] * t, -2.0 + v[1] * t, 0.7 + 0 * t]),
-        base_quaternion_xyzw=rotation.as_quat(), joint_positions=joints, source="walk",
+        time=t,
+        base_position=np.column_stack([1.0 + v[0] * t, -2.0 + v[1] * t, 0.7 + 0 * t]),
+        base_quaternion_xyzw=rotation.as_quat(),
+        joint_positions=joints,
+        source="walk",
         rate_hz=RATE,
-    )  # fmt: skip
+    )
     x, y, steps = clip_samples(clip, LAYOUT, frames)
     assert steps[0] == 52 and steps[-1] == n - 61 and np.all(np.diff(steps) == 1)
     # the facing angle at frame 0, from pinocchio (not the features' kinematics)
@@ -104,8 +107,9 @@ def test_features_match_a_closed_form(robot, frames):
     xs, ys, future = LAYOUT.x_slices, LAYOUT.y_slices, LAYOUT.future_offsets
     for row in (0, len(steps) // 2, len(steps) - 1):
         i = steps[row]
-        assert np.allclose(x[row, : xs["joints"].start], expected_window(i - 1, LAYOUT.offsets),
-                           atol=1e-9)  # fmt: skip
+        assert np.allclose(
+            x[row, : xs["joints"].start], expected_window(i - 1, LAYOUT.offsets), atol=1e-9
+        )
         assert np.allclose(y[row, : ys["joints"].start], expected_window(i, future), atol=1e-9)
         assert np.allclose(x[row, xs["joints"]], joints[i - 1])
         assert np.allclose(x[row, xs["joint_velocities"]], (joints[i - 1] - joints[i - 2]) / dt)
@@ -117,8 +121,9 @@ def test_features_match_a_closed_form(robot, frames):
 
 @pytest.fixture(scope="module")
 def small_params():
-    train = dataclasses.replace(PARAMS.train, epochs=2, batch_size=64, seeds=[0, 1],
-                                max_train_samples=None)  # fmt: skip
+    train = dataclasses.replace(
+        PARAMS.train, epochs=2, batch_size=64, seeds=[0, 1], max_train_samples=None
+    )
     features = dataclasses.replace(PARAMS.features, time_reversed=[])
     return dataclasses.replace(PARAMS, model=SMALL_MODEL, train=train, features=features)
 
@@ -219,20 +224,31 @@ def test_rollout_inverts_the_features(trained, robot, frames, past_velocity):
     _, layout, _, meta = load_adherent_model(trained[1] / "0")
     walk = [MotionSegment(3.0, 0.6, 0.0, 0.2)]
     run = AdherentRun(walk, "walk", {})
-    made, = generate_adherent(Stepping(layout, _standing(meta)), layout, [run], robot,
-                              CONTACT_PARAMS, _standing(meta), past_velocity="twist")  # fmt: skip
+    (made,) = generate_adherent(
+        Stepping(layout, _standing(meta)),
+        layout,
+        [run],
+        robot,
+        CONTACT_PARAMS,
+        _standing(meta),
+        past_velocity="twist",
+    )
     lead = 60  # standing frames before the rollout's first (frame 0: the start)
     pad = lambda a: np.concatenate([np.repeat(a[:1], lead - 1, axis=0), a])  # noqa: E731
     clip = Trajectory(
-        time=np.arange(len(made) + lead - 1) / RATE, base_position=pad(made.base_position),
+        time=np.arange(len(made) + lead - 1) / RATE,
+        base_position=pad(made.base_position),
         base_quaternion_xyzw=pad(made.base_quaternion_xyzw),
-        joint_positions=pad(made.joint_positions), source="made", rate_hz=RATE,
-    )  # fmt: skip
+        joint_positions=pad(made.joint_positions),
+        source="made",
+        rate_hz=RATE,
+    )
     x, y, steps = clip_samples(clip, layout, frames)
     start = int(np.searchsorted(steps, lead))  # sample of the rollout's first frame
     oracle = Oracle(y, start)
-    replay = AdherentGenerator(oracle, layout, robot, CONTACT_PARAMS, _standing(meta), 1,
-                               past_velocity)  # fmt: skip
+    replay = AdherentGenerator(
+        oracle, layout, robot, CONTACT_PARAMS, _standing(meta), 1, past_velocity
+    )
     n, ys, xs = len(steps) - start, layout.y_slices, layout.x_slices
     positions, supports = [], []
     for _ in range(n):
@@ -265,16 +281,19 @@ def test_leg_odometry_holds_the_support_corner(trained, robot):
     """While a foot stays the support, its pinned corner (ADHERENT's (+-0.08, +-0.03)) does not
     move and sits on the floor; the support foot is the one with the lowest corner."""
     _, layout, _, meta = load_adherent_model(trained[1] / "1")
-    generator = AdherentGenerator(Stepping(layout, _standing(meta)), layout, robot,
-                                  CONTACT_PARAMS, _standing(meta), 2)  # fmt: skip
-    desired = command_future(np.array([[0.6, 0.0], [0.0, 0.2]]), np.array([0.3, 0.0]),
-                             layout.future_offsets, RATE)  # fmt: skip
+    generator = AdherentGenerator(
+        Stepping(layout, _standing(meta)), layout, robot, CONTACT_PARAMS, _standing(meta), 2
+    )
+    desired = command_future(
+        np.array([[0.6, 0.0], [0.0, 0.2]]), np.array([0.3, 0.0]), layout.future_offsets, RATE
+    )
     held, previous, changes = [], None, 0
     for _ in range(120):
         generator.step(desired)
         corner = generator.support_corner_world()
-        world, _ = generator._corners(generator.rotation, generator.position, generator.joints,
-                                      ADHERENT_CORNERS)  # fmt: skip
+        world, _ = generator._corners(
+            generator.rotation, generator.position, generator.joints, ADHERENT_CORNERS
+        )
         lowest = world[..., 2].min(axis=2)  # (rows, feet)
         assert np.all(lowest[[0, 1], generator.support] <= lowest[[0, 1], 1 - generator.support])
         assert np.allclose(corner[:, 2], 0.0, atol=1e-12)
@@ -293,17 +312,27 @@ def test_rollout_stage_writes_nosteering_files(trained, tmp_path):
     trajectory contract's attributes and models.json."""
     script = [MotionSegment(0.6, 0.5, 0.0, 0.0)]
     rollout = dataclasses.replace(
-        PARAMS.rollout, scenarios={"forward": script}, scenario_names=["forward"],
-        benchmark_clips=False, benchmark_train_clips=0,
-        protocols={"authors": ProtocolParams(script=[MotionSegment(0.4, 0.4, 0.0, 0.0)],
-                                             unsteered={}, steered={})},
-    )  # fmt: skip
+        PARAMS.rollout,
+        scenarios={"forward": script},
+        scenario_names=["forward"],
+        benchmark_clips=False,
+        benchmark_train_clips=0,
+        protocols={
+            "authors": ProtocolParams(
+                script=[MotionSegment(0.4, 0.4, 0.0, 0.0)], unsteered={}, steered={}
+            )
+        },
+    )
     params = dataclasses.replace(PARAMS, rollout=rollout)
     out = tmp_path / "adherent"
     written = run_adherent_rollouts(trained[1], out, params, workers=1)
     names = sorted(p.relative_to(out).as_posix() for p in written)
-    assert names == ["0/authors-nosteering.h5", "0/forward-nosteering.h5",
-                     "1/authors-nosteering.h5", "1/forward-nosteering.h5"]  # fmt: skip
+    assert names == [
+        "0/authors-nosteering.h5",
+        "0/forward-nosteering.h5",
+        "1/authors-nosteering.h5",
+        "1/forward-nosteering.h5",
+    ]
     assert (out / "models.json").is_file()
     trajectory = read_trajectory(out / "1" / "forward-nosteering.h5")
     assert len(trajectory) == 31 and trajectory.joint_velocities is not None
@@ -318,8 +347,9 @@ def test_joystick_enters_the_future_half_as_blf_blends_it(robot):
     ((k + 1) / 6)^tau x the joystick's, tau 1.5 for positions and 1.3 for directions and
     velocities; the joystick's own future is the held command's path (a numeric integral)."""
     standing = StandingPose.nominal()
-    generator = AdherentGenerator(Stepping(LAYOUT, standing), LAYOUT, robot, CONTACT_PARAMS,
-                                  standing, 1)  # fmt: skip
+    generator = AdherentGenerator(
+        Stepping(LAYOUT, standing), LAYOUT, robot, CONTACT_PARAMS, standing, 1
+    )
     velocity, yaw_rate = np.array([[0.5, 0.2]]), np.array([0.6])
     desired = command_future(velocity, yaw_rate, LAYOUT.future_offsets, RATE)
     for k, offset in enumerate(LAYOUT.future_offsets):

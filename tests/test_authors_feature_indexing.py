@@ -82,9 +82,13 @@ def moving_clip(frames: int = FRAMES, seed: int = 3) -> Trajectory:
         if np.dot(quat[f], quat[f - 1]) < 0:
             quat[f] = -quat[f]
     return Trajectory(
-        time=t, base_position=position, base_quaternion_xyzw=quat, joint_positions=joints,
-        source="authors_indexing", rate_hz=RATE,
-    )  # fmt: skip
+        time=t,
+        base_position=position,
+        base_quaternion_xyzw=quat,
+        joint_positions=joints,
+        source="authors_indexing",
+        rate_hz=RATE,
+    )
 
 
 def authors_features(clip: Trajectory, window_list_shift: int = 0) -> tuple[dict, dict]:
@@ -130,15 +134,26 @@ def authors_features(clip: Trajectory, window_list_shift: int = 0) -> tuple[dict
     for i in range(WINDOW_LENGTH, n - WINDOW_LENGTH - WINDOW_STEP - 2):
         now, ahead = i - WINDOW_LENGTH, i - WINDOW_LENGTH + 1
         xs[i] = np.concatenate(
-            [np.concatenate(local_v[now]), np.concatenate(local_w[now]),
-             s[i - 1], s_dot[i - 2], p[i - 1], euler(q[i - 1])]
-        )  # fmt: skip
+            [
+                np.concatenate(local_v[now]),
+                np.concatenate(local_w[now]),
+                s[i - 1],
+                s_dot[i - 2],
+                p[i - 1],
+                euler(q[i - 1]),
+            ]
+        )
         future = [j for j, k in enumerate(WINDOW_INDEXES) if k >= 0]
         ys[i] = np.concatenate(
-            [np.concatenate([local_v[ahead][j] for j in future]),
-             np.concatenate([local_w[ahead][j] for j in future]),
-             s[i], s_dot[i - 1], p[i], euler(q[i])]
-        )  # fmt: skip
+            [
+                np.concatenate([local_v[ahead][j] for j in future]),
+                np.concatenate([local_w[ahead][j] for j in future]),
+                s[i],
+                s_dot[i - 1],
+                p[i],
+                euler(q[i]),
+            ]
+        )
     return xs, ys
 
 
@@ -146,9 +161,12 @@ def authors_features(clip: Trajectory, window_list_shift: int = 0) -> tuple[dict
 def layout():
     """The paper's layout: the authors' window, world pose, no gait phase."""
     features = dataclasses.replace(
-        load_params().features, window="authors", pose_input="world", gait_phase=False,
+        load_params().features,
+        window="authors",
+        pose_input="world",
+        gait_phase=False,
         time_reversed=[],
-    )  # fmt: skip
+    )
     layout = window_layout(features, RATE, "full")
     assert layout.input_offsets == tuple(WINDOW_INDEXES)
     assert layout.output_offsets == tuple(k for k in WINDOW_INDEXES if k >= 0)
@@ -209,9 +227,12 @@ def test_state_blocks_match_the_authors(which, clip, layout, pimann_features):
     steps = common(pimann, authors)
     slices = layout.x_slices if which == "x" else layout.y_slices
     errors = block_errors(
-        pimann, {i: authors[i] for i in steps}, slices, layout.names(which),
+        pimann,
+        {i: authors[i] for i in steps},
+        slices,
+        layout.names(which),
         ("joints", "joint_velocities", "base_position", "base_rpy"),
-    )  # fmt: skip
+    )
     assert not errors, "\n".join(errors)
 
 
@@ -254,9 +275,13 @@ def test_the_authors_angular_velocity_is_pimanns_up_to_the_formula(clip):
     q = clip.base_quaternion_xyzw[:, [3, 0, 1, 2]]
     qw, qx, qy, qz = q[1:].T
     e = np.stack(
-        [np.stack([-qx, qw, -qz, qy], -1), np.stack([-qy, qz, qw, -qx], -1),
-         np.stack([-qz, -qy, qx, qw], -1)], axis=1,
-    )  # fmt: skip
+        [
+            np.stack([-qx, qw, -qz, qy], -1),
+            np.stack([-qy, qz, qw, -qx], -1),
+            np.stack([-qz, -qy, qx, qw], -1),
+        ],
+        axis=1,
+    )
     authors = 2 * np.einsum("tij,tj->ti", e, np.diff(q, axis=0) / DT)
     assert np.abs(authors - exact).max() < 0.2 * ANGULAR_ATOL
     assert np.abs(np.diff(exact, axis=0)).max() > 20 * ANGULAR_ATOL

@@ -44,8 +44,9 @@ def test_a_sole_on_its_heel_counts_two_steps_by_the_authors_rule(robot):
     )
     # the authors' flags: the right foot swings high, the left origin sits at 4.6 cm
     configurations = trajectory_configurations(robot, trajectory)
-    heights = np.array([[robot.frame_placement(q, f).translation[2] for f in FEET]
-                        for q in configurations])  # fmt: skip
+    heights = np.array(
+        [[robot.frame_placement(q, f).translation[2] for f in FEET] for q in configurations]
+    )
     assert heights[:, 0] == pytest.approx(np.full(FRAMES, 0.1167 * np.sin(0.4)), abs=2e-3)
     flags = np.zeros((FRAMES, 2), dtype=bool)
     flags[1:] = contacts_from_heights(heights[1:], 1 / 50, CONTACT_PARAMS, initial=True)
@@ -93,10 +94,13 @@ def test_the_lag_residual_is_the_support_jacobians_change(robot):
             quaternions.append(pin.Quaternion(rotation).coeffs())
             positions.append(np.linalg.matrix_power(yaw, k) @ base.base_position[0])
         trajectory = dataclasses.replace(
-            base, time=base.time[:n], base_position=np.array(positions),
+            base,
+            time=base.time[:n],
+            base_position=np.array(positions),
             base_quaternion_xyzw=np.array(quaternions),
-            joint_positions=np.tile(base.joint_positions[0], (n, 1)), joint_velocities=sdot,
-        )  # fmt: skip
+            joint_positions=np.tile(base.joint_positions[0], (n, 1)),
+            joint_velocities=sdot,
+        )
         q = trajectory_configurations(robot, trajectory)
         feet = foot_kinematics(robot, q)
         velocities = authors_sole_velocities(robot, q, sole_jacobians(robot, q), sdot, feet)
@@ -174,10 +178,14 @@ def test_frame_by_frame_recomputation_on_a_real_walk(robot, real_walks):
     steps = np.diff(walk.joint_positions[:n], axis=0) * walk.rate_hz
     sdot = np.vstack([np.zeros((1, steps.shape[1])), steps]) + rng.normal(0, 0.05, (n, 26))
     trajectory = dataclasses.replace(
-        walk, time=walk.time[:n], base_position=walk.base_position[:n],
+        walk,
+        time=walk.time[:n],
+        base_position=walk.base_position[:n],
         base_quaternion_xyzw=walk.base_quaternion_xyzw[:n],
-        joint_positions=walk.joint_positions[:n], joint_velocities=sdot, contacts=None,
-    )  # fmt: skip
+        joint_positions=walk.joint_positions[:n],
+        joint_velocities=sdot,
+        contacts=None,
+    )
     metrics = trajectory_metrics(trajectory, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     linear, angular = _reference_paper_metric(robot, trajectory, sdot)
     assert linear > 1.0 and angular > 0.3  # the walk slides under this metric: not vacuous

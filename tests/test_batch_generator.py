@@ -87,9 +87,17 @@ def batch_against_alone(
     )
     for spec, row in zip(specs, rows, strict=True):
         alone = generate_rollout(
-            model, LAYOUT, stats, spec.script, rollout_params, spec.steering, robot,
-            contact_params=params.contacts, source=spec.source, attrs=spec.attrs,
-        )  # fmt: skip
+            model,
+            LAYOUT,
+            stats,
+            spec.script,
+            rollout_params,
+            spec.steering,
+            robot,
+            contact_params=params.contacts,
+            source=spec.source,
+            attrs=spec.attrs,
+        )
         frames = None if joint_speed is None else frames_in_range(alone, joint_speed)
         assert frames is None or frames >= 35, f"{spec.source} leaves the range at {frames}"
         assert_same_rollout(alone, row, tolerance, frames)
@@ -124,16 +132,23 @@ def trained(robot, params) -> tuple[MANN, Normalisation]:
     torch.set_num_threads(1)
     walk = M(3.0, 0.5, 0.0, 0.0)
     data = generate_rollout(
-        GaitModel(robot), LAYOUT, IDENTITY, [walk, S(1.5, True), walk], params.rollout, True,
-        robot, contact_params=params.contacts,
-    ).trajectory  # fmt: skip
+        GaitModel(robot),
+        LAYOUT,
+        IDENTITY,
+        [walk, S(1.5, True), walk],
+        params.rollout,
+        True,
+        robot,
+        contact_params=params.contacts,
+    ).trajectory
     x, y, _ = clip_features(data, LAYOUT)
     stats = Normalisation.fit(x, y)
     xn = torch.tensor(stats.normalise_x(x), dtype=torch.float64)
     yn = torch.tensor(stats.normalise_y(y), dtype=torch.float64)
     torch.manual_seed(3)
-    model = MANN(LAYOUT.input_dim, LAYOUT.output_dim, ModelParams(2, 8, 2, 32, 2, 0.0, "elu"),
-                 seeds=[0]).double()  # fmt: skip
+    model = MANN(
+        LAYOUT.input_dim, LAYOUT.output_dim, ModelParams(2, 8, 2, 32, 2, 0.0, "elu"), seeds=[0]
+    ).double()
     optimiser = torch.optim.Adam(model.parameters(), lr=3e-3)
     for _ in range(800):
         optimiser.zero_grad()
@@ -190,10 +205,18 @@ def test_numpy_mann_equals_forward(params, dtype, tolerance):
 def test_a_cpu_model_runs_its_network_in_numpy(robot, params, trained):
     model, stats = trained
     generators = [
-        BatchGenerator(candidate, LAYOUT, stats, params.rollout, np.ones(rows, bool), robot,
-                       params.contacts, StandingPose.nominal())
+        BatchGenerator(
+            candidate,
+            LAYOUT,
+            stats,
+            params.rollout,
+            np.ones(rows, bool),
+            robot,
+            params.contacts,
+            StandingPose.nominal(),
+        )
         for candidate, rows in ((model, 1), (model, 2), (_two_member(model), 2))
-    ]  # fmt: skip
+    ]
     assert isinstance(generators[0].network.numpy, NumpyMANN)  # alone
     assert isinstance(generators[1].network.numpy, NumpyMANN)  # a batch
     assert generators[2].network.numpy is None  # an ensemble keeps torch

@@ -109,8 +109,14 @@ def test_params_prints_the_effective_params_of_a_profile(tmp_path, capsys):
     quick = yaml.safe_load(capsys.readouterr().out)
     assert quick["profile"] == "quick" and quick["train"]["epochs"] == 7
     assert quick["contacts"] == paper["contacts"] == raw["contacts"]
-    moved = ("scenario", "box_weights", "large_weight", "foot_height_weights", "foot_steering",
-             "drift_reduction")  # fmt: skip
+    moved = (
+        "scenario",
+        "box_weights",
+        "large_weight",
+        "foot_height_weights",
+        "foot_steering",
+        "drift_reduction",
+    )
     assert {k: quick["evaluate"][k] for k in moved} == {k: raw["evaluate"][k] for k in moved}
     assert set(quick["figures"]) == {"width_in", "font_pt", "dpi"}  # the style alone
     assert main(["params", "--params", str(path), "--profile", "huge"]) == 2

@@ -189,9 +189,13 @@ def test_retarget_clip_labels_clips_and_the_split_keeps_takes_together(monkeypat
             collection += [(clip_name, trajectory), (f"{clip_name}_mirror", mirror(trajectory))]
     names = [n for n, _ in collection]
     assert names[:6] == [
-        "walk_a_c01", "walk_a_c01_mirror", "walk_a_c02", "walk_a_c02_mirror",
-        "walk_a_c03", "walk_a_c03_mirror",
-    ]  # fmt: skip
+        "walk_a_c01",
+        "walk_a_c01_mirror",
+        "walk_a_c02",
+        "walk_a_c02_mirror",
+        "walk_a_c03",
+        "walk_a_c03_mirror",
+    ]
     first = dict(collection)["walk_a_c02"]
     assert first.source == "walk_a.bvh"
     assert first.attrs["dataset"] == "mine" and first.attrs["take"] == "walk_a"

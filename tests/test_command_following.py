@@ -44,9 +44,11 @@ def follow(script, heading=0.0, wobble=0.0, sway=0.0, speed_scale=1.0) -> tuple:
     steps = round(ends[-1] * RATE)
     segment = np.minimum(np.searchsorted(ends, (np.arange(steps) + 0.5) * DT), len(script) - 1)
     commands = np.array(
-        [[0.0, 0.0, 0.0] if isinstance(s, StandSegment) else [s.vx, s.vy, s.yaw_rate]
-         for s in script]
-    )[segment]  # fmt: skip
+        [
+            [0.0, 0.0, 0.0] if isinstance(s, StandSegment) else [s.vx, s.vy, s.yaw_rate]
+            for s in script
+        ]
+    )[segment]
     t = np.arange(steps) * DT
     moving = np.hypot(commands[:, 0], commands[:, 1]) > 0
     vx = speed_scale * commands[:, 0] + moving * wobble * np.sin(4 * np.pi * t)
@@ -104,8 +106,14 @@ def test_clip_commands_of_a_swaying_gait_with_turns_and_side_steps():
     assert_segments(found, script, duration_tol=0.1, speed_tol=0.03, yaw_tol=0.03)
     classes = [segment_class(s) for s in found]
     assert classes == [
-        "standing", "forward", "turning", "side", "backward", "turning_in_place", "standing"
-    ]  # fmt: skip
+        "standing",
+        "forward",
+        "turning",
+        "side",
+        "backward",
+        "turning_in_place",
+        "standing",
+    ]
 
 
 def test_clip_commands_keep_a_steady_walk_whole_and_feed_the_generator():
@@ -183,8 +191,9 @@ def test_follow_measures_of_a_robot_that_stands_still(robot):
     assert row["speed_ratio"] == pytest.approx(0.0, abs=1e-9)
     assert row["heading_error_max_deg"] == pytest.approx(0.0, abs=1e-9)
     assert row["alternates"] is False
-    summary = cf.summarise_following(pd.DataFrame([{**row, "model": "m", "steering": False,
-                                                    "seed": 0}]))  # fmt: skip
+    summary = cf.summarise_following(
+        pd.DataFrame([{**row, "model": "m", "steering": False, "seed": 0}])
+    )
     assert bool(summary.loc[0, "speed_pass"]) is False
     assert bool(summary.loc[0, "heading_pass"]) is True
     assert bool(summary.loc[0, "passes"]) is False

@@ -14,8 +14,11 @@ RATE = 50.0
 
 
 def test_each_step_takes_the_segment_its_midpoint_falls_in():
-    script = [MotionSegment(1.0, 0.8, 0.0, 0.0), StandSegment(0.5, True),
-              MotionSegment(0.26, 0.0, 0.2, 0.1)]  # fmt: skip
+    script = [
+        MotionSegment(1.0, 0.8, 0.0, 0.0),
+        StandSegment(0.5, True),
+        MotionSegment(0.26, 0.0, 0.2, 0.1),
+    ]
     steps = scenario_steps(script, RATE)
     assert len(steps) == round(1.76 * RATE) == 88
     # step k spans [k dt, (k+1) dt): the first 50 in segment 0, the next 25 in 1, 13 in 2
@@ -31,8 +34,9 @@ def test_an_empty_script_is_refused():
         scenario_steps([], RATE)
 
 
-@pytest.mark.parametrize("make", [lambda: MotionSegment(0.0, 0.1, 0, 0),
-                                  lambda: StandSegment(-1.0, True)])  # fmt: skip
+@pytest.mark.parametrize(
+    "make", [lambda: MotionSegment(0.0, 0.1, 0, 0), lambda: StandSegment(-1.0, True)]
+)
 def test_a_non_positive_duration_is_refused_where_the_segment_is_made(make):
     with pytest.raises(ValidationError, match="greater than 0"):
         make()

@@ -130,8 +130,9 @@ def test_sliding_is_the_evaluate_stage_metric(robot, params, rng):
     n = 150
     joints = STANDING_JOINTS + 0.1 * np.sin(np.arange(n)[:, None] / 9.0 + rng.uniform(0, 6, 26))
     contacts = rng.random((n, 2)) < 0.6
-    trajectory = make_trajectory(line(0.4, 0.2, n / RATE), yaw=0.2, contacts=contacts,
-                                 joints=joints)  # fmt: skip
+    trajectory = make_trajectory(
+        line(0.4, 0.2, n / RATE), yaw=0.2, contacts=contacts, joints=joints
+    )
     frames = dr.clip_frames("clip", trajectory, params)
     file = trajectory_metrics(trajectory, robot, params.evaluate, params.contacts)
     detected = trajectory_metrics(
@@ -185,8 +186,9 @@ def test_floor_reports_a_sole_in_the_floor_and_flight(params):
     z[40:50] = -0.02
     contacts = np.ones((100, 2), bool)
     contacts[60:65] = False
-    frames = dr.clip_frames("clip", make_trajectory(np.zeros((100, 2)), z=z, contacts=contacts),
-                            params)  # fmt: skip
+    frames = dr.clip_frames(
+        "clip", make_trajectory(np.zeros((100, 2)), z=z, contacts=contacts), params
+    )
     floor = dr.floor(frames)
     resting = frames["lowest_corner"].iloc[0]  # the standing pose's soles: within 0.1 mm of 0
     assert abs(resting) < 1e-4
@@ -207,11 +209,19 @@ def test_below_the_floor_is_the_retarget_quality_check_threshold():
 
 
 def test_report_per_source_with_mirrors_and_outputs(params, tmp_path):
-    walk = make_trajectory(line(0.8, 0.0, 6.0), contacts=np.ones((300, 2), bool),
-                           dataset="bandai_namco", content="walk")  # fmt: skip
+    walk = make_trajectory(
+        line(0.8, 0.0, 6.0),
+        contacts=np.ones((300, 2), bool),
+        dataset="bandai_namco",
+        content="walk",
+    )
     mirror = dataclasses.replace(walk, attrs={**walk.attrs, "mirrored": True})
-    side = make_trajectory(line(0.3, math.pi / 2, 6.0), contacts=np.ones((300, 2), bool),
-                           dataset="avatargovr", content="")  # fmt: skip
+    side = make_trajectory(
+        line(0.3, math.pi / 2, 6.0),
+        contacts=np.ones((300, 2), bool),
+        dataset="avatargovr",
+        content="",
+    )
     collection = tmp_path / "walking.h5"
     write_collection(collection, [("walk", walk), ("walk_mirror", mirror), ("side", side)])
     report = dr.data_report(collection, params)

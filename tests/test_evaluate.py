@@ -166,8 +166,10 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     summary = summarise_following(following)
     w10 = summary[(summary["model"] == "w10") & ~summary["steering"]]
     assert set(zip(w10["split"], w10["class"], strict=True)) == {
-        ("held_out", "forward"), ("training", "forward"), ("training", "standing")
-    }  # fmt: skip
+        ("held_out", "forward"),
+        ("training", "forward"),
+        ("training", "standing"),
+    }
     trained = w10[(w10["split"] == "training") & (w10["class"] == "forward")].iloc[0]
     runs = following[(following["model"] == "w10") & (following["scenario"] == "train_d")]
     assert trained["seeds"] == 2 and trained["speed_ratio"] == pytest.approx(
@@ -199,11 +201,14 @@ def test_a_seed_whose_rollouts_fail_is_recorded_and_the_rest_written(params, tmp
     short = dataclasses.replace(
         params,
         rollout=dataclasses.replace(
-            params.rollout, scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]},
-            scenario_names=["short"], benchmark_clips=False, benchmark_train_clips=0,
+            params.rollout,
+            scenarios={"short": [MotionSegment(0.4, 0.5, 0.0, 0.0)]},
+            scenario_names=["short"],
+            benchmark_clips=False,
+            benchmark_train_clips=0,
             protocols={},
         ),
-    )  # fmt: skip
+    )
     models = tmp_path / "models" / "w10"
     tiny_models(models, 10.0, "full", [0, 1])
     broken = models / "1" / "model.pt"

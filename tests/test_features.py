@@ -111,9 +111,11 @@ def test_constant_velocity_features_match_closed_form(params):
     # psi against pinocchio's rpy, and yaw unwrapped: continuous past pi
     rpy = y[:, ys["base_rpy"]]
     reference = np.array(
-        [pin.rpy.matrixToRpy(Rotation.from_quat(q).as_matrix()) for q in
-         clip.base_quaternion_xyzw[steps]]
-    )  # fmt: skip
+        [
+            pin.rpy.matrixToRpy(Rotation.from_quat(q).as_matrix())
+            for q in clip.base_quaternion_xyzw[steps]
+        ]
+    )
     np.testing.assert_allclose(np.angle(np.exp(1j * (rpy - reference))), 0.0, atol=1e-9)
     assert rpy[-1, 2] > np.pi and np.all(np.abs(np.diff(rpy[:, 2]) - yaw_rate / RATE) < 1e-9)
 
@@ -280,8 +282,10 @@ def test_normalisation_uses_training_statistics_only(params, tmp_path):
     clip_of = dict(clips)
     margin = round(params.features.contact_margin_s * RATE)
     assert margin == 2
-    for contacts, origin in ((back.train_contacts, back.train_origin),
-                             (back.test_contacts, back.test_origin)):  # fmt: skip
+    for contacts, origin in (
+        (back.train_contacts, back.train_origin),
+        (back.test_contacts, back.test_origin),
+    ):
         expected = []
         for k, step in origin:
             raw = clip_of[dataset.clips[k]].contacts

@@ -1,5 +1,5 @@
-"""What every figure shares (pimann.evaluate.figure_style): style, colours, footer, atomic saving with
-the provenance in the files' metadata."""
+"""What every figure shares (pimann.evaluate.figure_style): style, colours, footer, atomic
+saving with the provenance in the files' metadata."""
 
 from __future__ import annotations
 
@@ -18,8 +18,14 @@ from pimann.evaluate.figure_style import (
     weight_colours,
 )
 
-PROVENANCE = {"profile": "quick", "epochs": 70, "clips": 71, "seeds": [0, 1],
-              "scenario": "forward", "other": "not recorded"}  # fmt: skip
+PROVENANCE = {
+    "profile": "quick",
+    "epochs": 70,
+    "clips": 71,
+    "seeds": [0, 1],
+    "scenario": "forward",
+    "other": "not recorded",
+}
 
 
 @pytest.fixture(scope="module")

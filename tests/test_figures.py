@@ -50,8 +50,7 @@ def test_footer_only_when_not_the_paper_profile(params, tmp_path):
     with_paper = load_results(crafted_results(tmp_path / "paper", params, "paper"))
     for results, expected in ((with_quick, ["profile: quick"]), (with_paper, [])):
         fig = fig_foot_heights(results, params.figures, params.evaluate)
-        save_figure(fig, tmp_path / f"out_{results.provenance['profile']}", "f",
-                    results.provenance)  # fmt: skip
+        save_figure(fig, tmp_path / f"out_{results.provenance['profile']}", "f", results.provenance)
         assert [t.get_text() for t in fig.texts] == expected
         assert fig.get_size_inches()[0] == pytest.approx(params.figures.width_in)
 

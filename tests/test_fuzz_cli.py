@@ -29,8 +29,9 @@ def _trajectory(frames: int = 60) -> Trajectory:
     quaternion = np.tile([0.0, 0.0, 0.0, 1.0], (frames, 1))
     joints = np.tile(STANDING_JOINTS, (frames, 1))
     contacts = np.ones((frames, 2), bool)
-    return Trajectory(time, position, quaternion, joints, source="fuzz", rate_hz=50.0,
-                      contacts=contacts)  # fmt: skip
+    return Trajectory(
+        time, position, quaternion, joints, source="fuzz", rate_hz=50.0, contacts=contacts
+    )
 
 
 def _mocap_files(tmp_path):
@@ -38,8 +39,9 @@ def _mocap_files(tmp_path):
     motion = text.index("MOTION")
     lines = text.splitlines()
     frames_at = next(k for k, line in enumerate(lines) if line.strip().startswith("Frame Time"))
-    nan = lines[: frames_at + 3] + [lines[frames_at + 3].replace(lines[frames_at + 3].split()[4],
-                                                                  "nan", 1)]  # fmt: skip
+    nan = lines[: frames_at + 3] + [
+        lines[frames_at + 3].replace(lines[frames_at + 3].split()[4], "nan", 1)
+    ]
     h5 = tmp_path / "layout.bvh"
     with h5py.File(h5, "w") as file:
         file.create_dataset("x", data=np.zeros(3))
@@ -71,8 +73,11 @@ def _trajectory_files(tmp_path):
         file.create_dataset("time", data=np.arange(10) / 50.0)
         file.create_dataset("base_position", data=np.zeros((10, 2)))
     paths = {"nan": nan_path, "layout": layout}
-    for name, data in (("empty", b""), ("truncated", good.read_bytes()[:3000]),
-                       ("text", b"time,x\n0,1\n")):  # fmt: skip
+    for name, data in (
+        ("empty", b""),
+        ("truncated", good.read_bytes()[:3000]),
+        ("text", b"time,x\n0,1\n"),
+    ):
         path = tmp_path / f"{name}.h5"
         path.write_bytes(data)
         paths[name] = path

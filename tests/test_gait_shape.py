@@ -56,12 +56,16 @@ def test_a_robot_turned_in_place_twists_its_soles_with_its_base(robot):
     np.testing.assert_allclose(shape["leg_yaw_rate"], 0.0, atol=1e-6)
     # each sole origin circles the base's vertical axis: speed = rate x its horizontal radius
     q, data = standing_kinematics(robot)
-    radii = [np.linalg.norm(data.oMf[robot.model.getFrameId(f)].translation[:2] - q[:2])
-             for f in (LEFT_SOLE, RIGHT_SOLE)]  # fmt: skip
+    radii = [
+        np.linalg.norm(data.oMf[robot.model.getFrameId(f)].translation[:2] - q[:2])
+        for f in (LEFT_SOLE, RIGHT_SOLE)
+    ]
     np.testing.assert_allclose(shape["contact_horizontal_speed"], rate * np.mean(radii), rtol=1e-3)
     # turning about the vertical keeps each sole's standing tilt (the median of the two)
-    tilts = [np.degrees(np.arccos(data.oMf[robot.model.getFrameId(f)].rotation[2, 2]))
-             for f in (LEFT_SOLE, RIGHT_SOLE)]  # fmt: skip
+    tilts = [
+        np.degrees(np.arccos(data.oMf[robot.model.getFrameId(f)].rotation[2, 2]))
+        for f in (LEFT_SOLE, RIGHT_SOLE)
+    ]
     np.testing.assert_allclose(shape["contact_tilt_deg"], np.median(tilts), atol=1e-6)
     assert np.isnan(shape["leg_step_high_share"])  # legs that never move: no step to judge
 
@@ -103,12 +107,15 @@ def test_compare_puts_rollouts_of_the_class_clips_beside_those_clips(params, tmp
     assert len(clips) == 2  # c and its mirror
     for seed in (0, 1):
         for clip in clips:
-            write_trajectory(tmp_path / "rollouts" / "w10" / str(seed)
-                             / f"{clip.scenario}-steering.h5", clip.trajectory)  # fmt: skip
+            write_trajectory(
+                tmp_path / "rollouts" / "w10" / str(seed) / f"{clip.scenario}-steering.h5",
+                clip.trajectory,
+            )
         still = make_trajectory(np.zeros((100, 2)))
         write_trajectory(tmp_path / "rollouts" / "w10" / str(seed) / "forward-steering.h5", still)
-        write_trajectory(tmp_path / "rollouts" / "w10" / str(seed)
-                         / f"{clips[0].scenario}-nosteering.h5", still)  # fmt: skip
+        write_trajectory(
+            tmp_path / "rollouts" / "w10" / str(seed) / f"{clips[0].scenario}-nosteering.h5", still
+        )
     majority = majority_class(class_counts(clips[0].trajectory))
     table = compare([tmp_path / "rollouts" / "w10"], majority, HELD_OUT, params)
     rollouts, clips_row = table.iloc[0], table.iloc[1]

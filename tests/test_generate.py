@@ -292,9 +292,16 @@ def test_a_rollout_starts_and_stops_in_the_given_standing_pose(robot, params):
     standing = StandingPose(joints, np.array([0.0, 0.05]), "test")
     scenario = [StandSegment(0.2, True), MotionSegment(1.0, 0.4, 0.0, 0.0), StandSegment(1.0, True)]
     rollout = generate_rollout(
-        GaitModel(robot), LAYOUT, IDENTITY, scenario, params.rollout, False, robot,
-        contact_params=params.contacts, standing=standing,
-    )  # fmt: skip
+        GaitModel(robot),
+        LAYOUT,
+        IDENTITY,
+        scenario,
+        params.rollout,
+        False,
+        robot,
+        contact_params=params.contacts,
+        standing=standing,
+    )
     trajectory = rollout.trajectory
     np.testing.assert_array_equal(trajectory.joint_positions[0], joints)
     np.testing.assert_array_equal(trajectory.joint_positions[-1], joints)  # stopped: back in it

@@ -31,8 +31,9 @@ def layout_of(variant: str, gait_phase: bool = False):
     return dataclasses.replace(layout, gait_phase_step_s=0.8 if gait_phase else None)
 
 
-@pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("variant", "gait_phase"), [*((v, False) for v in VARIANTS), ("full", True)]
+)
 def test_no_output_column_copies_an_input_column(real_walks, variant, gait_phase):
     """Every output column that varies differs from every input column somewhere; the joints
     and their velocities are first differences (s_i = s_{i-1} + dt sdot_i exactly), and y_i's
@@ -95,16 +96,23 @@ def oracle_rollout(robot, clips, starts, variant, steps, gait_phase=False):
     identity = Normalisation(np.zeros(n_in), np.ones(n_in), np.zeros(n_out), np.ones(n_out))
     rollout = dataclasses.replace(PARAMS.rollout, command_blend_tau=None)
     generator = BatchGenerator(
-        torch.nn.Linear(n_in, n_out), layout, identity, rollout, np.zeros(len(clips), bool),
-        robot, CONTACT_PARAMS, StandingPose.nominal(),
-    )  # fmt: skip
+        torch.nn.Linear(n_in, n_out),
+        layout,
+        identity,
+        rollout,
+        np.zeros(len(clips), bool),
+        robot,
+        CONTACT_PARAMS,
+        StandingPose.nominal(),
+    )
     generator.network = oracle = Oracle(rows)
     data_start(clips, starts, generator)
     plan = ScriptSteps([[MotionSegment(steps / 50.0, 0.5, 0.0, 0.0)]] * len(clips), 50.0)
     joints, rotations, positions = [], [], []
     for k in range(1, steps + 1):
-        generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k], plan.changed[k],
-                       plan.active[k])  # fmt: skip
+        generator.step(
+            k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k], plan.changed[k], plan.active[k]
+        )
         joints.append(generator.joints.copy())
         rotations.append(generator.rotation.copy())
         positions.append(generator.position.copy())
@@ -119,8 +127,9 @@ def clip_rotations(clip, variant):
     return rotations
 
 
-@pytest.mark.parametrize(("variant", "gait_phase"), [*((v, False) for v in VARIANTS),
-                                                     ("full", True)])  # fmt: skip
+@pytest.mark.parametrize(
+    ("variant", "gait_phase"), [*((v, False) for v in VARIANTS), ("full", True)]
+)
 @pytest.mark.parametrize("batched", [False, True])
 def test_oracle_rollout_rebuilds_the_data_inputs_and_joints(
     robot, real_walks, variant, gait_phase, batched

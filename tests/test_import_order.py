@@ -20,9 +20,17 @@ DIAGNOSTICS = "diagnostics"  # beside pimann, above the whole pipeline
 # the pipeline's order; `render` (stick-figure drawing) sits above mocap, whose person it
 # draws, and below sim, whose videos it draws (the simulation reads only render's robot part)
 STAGE_ORDER = (
-    "core", "mocap", "render", "retarget", "learn", "generate", "evaluate", "sim", "report",
+    "core",
+    "mocap",
+    "render",
+    "retarget",
+    "learn",
+    "generate",
+    "evaluate",
+    "sim",
+    "report",
     "cli",
-)  # fmt: skip
+)
 
 
 def module_files(root: Path) -> dict[str, Path]:

@@ -230,9 +230,10 @@ def _still_feet_joint_velocities(robot, trajectory) -> np.ndarray:
                 model, data, robot.frame_id(frame), pin.LOCAL_WORLD_ALIGNED
             )
             legs = [
-                j for j, name in enumerate(JOINT_NAMES)
+                j
+                for j, name in enumerate(JOINT_NAMES)
                 if name.startswith(prefix) and any(p in name for p in ("hip", "knee", "ankle"))
-            ]  # fmt: skip
+            ]
             columns = jacobian[:, robot.v_index[legs]]
             out[k, legs] = np.linalg.lstsq(columns, -jacobian[:, :6] @ v[k, :6], rcond=None)[0]
     return out
@@ -270,8 +271,9 @@ def test_levels_agree_when_the_base_keeps_the_foot_still(robot):
     metrics = trajectory_metrics(still, robot, PARAMS, CONTACTS)
     assert metrics["joint_velocity_gap_rms"] < 0.01  # finite-difference error only
 
-    slid = trajectory_metrics(stance_trajectory(robot, slide=0.05, joint_velocities=True), robot,
-                              PARAMS, CONTACTS)  # fmt: skip
+    slid = trajectory_metrics(
+        stance_trajectory(robot, slide=0.05, joint_velocities=True), robot, PARAMS, CONTACTS
+    )
     assert slid["support_rmse_linear_left"] == pytest.approx(0.0, abs=1e-9)
     expected = FRAMES * 0.05 / SQRT3
     assert slid["support_rmse_linear_position_left"] == pytest.approx(expected, abs=2e-2)
@@ -280,8 +282,9 @@ def test_levels_agree_when_the_base_keeps_the_foot_still(robot):
     still.joint_velocities = np.zeros_like(true_velocities)
     wrong = trajectory_time_series(still, robot, PARAMS, CONTACTS)
     assert wrong[["left_rms_linear", "right_rms_linear"]].to_numpy().max() == 0.0
-    np.testing.assert_array_equal(wrong["right_rms_linear_position"],
-                                  series["right_rms_linear_position"])  # fmt: skip
+    np.testing.assert_array_equal(
+        wrong["right_rms_linear_position"], series["right_rms_linear_position"]
+    )
     gap = trajectory_metrics(still, robot, PARAMS, CONTACTS)["joint_velocity_gap_rms"]
     assert gap == pytest.approx(np.sqrt(np.mean(true_velocities**2)), rel=0.02)
 

@@ -94,18 +94,28 @@ def test_rollouts_start_from_the_given_state_and_sustainment_reports_each_clip(t
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
     torch.manual_seed(0)
     model = MANN(dataset.layout.input_dim, dataset.layout.output_dim, small, seeds=[0])
-    meta = {"pi_weight": 0.0, "seed": 0, "variant": "full", "dataset": str(tmp_path / "full.h5"),
-            "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
+    meta = {
+        "pi_weight": 0.0,
+        "seed": 0,
+        "variant": "full",
+        "dataset": str(tmp_path / "full.h5"),
+        "params": {"model": dataclasses.asdict(small)},
+    }
     save_model(tmp_path / "w0" / "0", model, dataset.layout, dataset.stats, meta)
 
     model, layout, stats, _ = load_model(tmp_path / "w0" / "0")
     pose = StandingPose(clips[0][1].joint_positions[80].copy(), np.zeros(2), "mid-stride")
     velocities = np.linspace(-1.0, 1.0, len(pose.joints))
     (rollout,) = generate_batch(
-        model, layout, stats, [RolloutSpec([MotionSegment(1.0, 0.5, 0.0, 0.0)], False)],
-        params.rollout, contact_params=params.contacts, standing=pose,
+        model,
+        layout,
+        stats,
+        [RolloutSpec([MotionSegment(1.0, 0.5, 0.0, 0.0)], False)],
+        params.rollout,
+        contact_params=params.contacts,
+        standing=pose,
         start_joint_velocities=velocities,
-    )  # fmt: skip
+    )
     np.testing.assert_array_equal(rollout.trajectory.joint_positions[0], pose.joints)
     np.testing.assert_array_equal(rollout.trajectory.joint_velocities[0], velocities)
 

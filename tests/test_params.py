@@ -173,9 +173,14 @@ def test_what_evaluate_selects_for_the_figures_and_claims_loads_under_evaluate()
     """evaluate's choices for the figures and claims (the scenario, the weights compared, the
     foot rollouts, the drift factor) load from its own section in either profile; figures keeps
     the style alone."""
-    selection = {"scenario": "authors", "box_weights": [0.0, 1.0, 10.0, 20.0],
-                 "large_weight": 100.0, "foot_height_weights": [0.0, 10.0],
-                 "foot_steering": False, "drift_reduction": 0.5}  # fmt: skip
+    selection = {
+        "scenario": "authors",
+        "box_weights": [0.0, 1.0, 10.0, 20.0],
+        "large_weight": 100.0,
+        "foot_height_weights": [0.0, 10.0],
+        "foot_steering": False,
+        "drift_reduction": 0.5,
+    }
     for profile in ("quick", "paper"):
         params = load_params(profile=profile)
         assert {key: getattr(params.evaluate, key) for key in selection} == selection, profile

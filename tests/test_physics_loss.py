@@ -145,10 +145,12 @@ def test_feet_motion_is_the_other_soles_motion_seen_from_the_lower_one(robot, lo
     for q0, q1, angles in zip(before, after, rpy, strict=True):
         quaternion = pin.Quaternion(pin.rpy.rpyToMatrix(angles)).coeffs()
         poses = [
-            {f: robot.frame_placement(robot.configuration(np.zeros(3), quaternion, q), f)
-             for f in (LEFT_SOLE, RIGHT_SOLE)}
+            {
+                f: robot.frame_placement(robot.configuration(np.zeros(3), quaternion, q), f)
+                for f in (LEFT_SOLE, RIGHT_SOLE)
+            }
             for q in (q0, q1)
-        ]  # fmt: skip
+        ]
         z = {f: poses[1][f].translation[2] for f in (LEFT_SOLE, RIGHT_SOLE)}
         lower, other = sorted(z, key=z.get)
         relative = [p[lower].inverse() * p[other] for p in poses]

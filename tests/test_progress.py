@@ -34,8 +34,9 @@ class Clock:
 def _run(steps: int, seconds_per_step: float, caplog) -> list[str]:
     caplog.clear()
     with caplog.at_level(logging.INFO, logger=LOGGER):
-        progress = Progress(steps, "work", "steps", logger=logging.getLogger(LOGGER),
-                            clock=Clock(seconds_per_step))  # fmt: skip
+        progress = Progress(
+            steps, "work", "steps", logger=logging.getLogger(LOGGER), clock=Clock(seconds_per_step)
+        )
         for k in range(steps):
             progress.update(postfix=f"loss {1.0 / (k + 1):.3f}")
         progress.close()

@@ -145,13 +145,20 @@ def test_contacts_from_height_when_not_given(robot):
 def tpose_human(n: int = 9, rate: float = 100.0, start: float = 3.0) -> HumanMotion:
     """Identity orientations (T-pose), segments at rough human heights, walking along x."""
     layout = {
-        "Pelvis": (0, 0, 0.95), "T8": (0, 0, 1.25), "Head": (0, 0, 1.55),
-        "LeftUpperLeg": (0, 0.09, 0.92), "LeftLowerLeg": (0, 0.09, 0.48),
-        "LeftFoot": (0, 0.09, 0.08), "RightUpperLeg": (0, -0.09, 0.92),
-        "RightLowerLeg": (0, -0.09, 0.48), "RightFoot": (0, -0.09, 0.08),
-        "LeftUpperArm": (0, 0.2, 1.4), "LeftForeArm": (0, 0.5, 1.4),
-        "RightUpperArm": (0, -0.2, 1.4), "RightForeArm": (0, -0.5, 1.4),
-    }  # fmt: skip
+        "Pelvis": (0, 0, 0.95),
+        "T8": (0, 0, 1.25),
+        "Head": (0, 0, 1.55),
+        "LeftUpperLeg": (0, 0.09, 0.92),
+        "LeftLowerLeg": (0, 0.09, 0.48),
+        "LeftFoot": (0, 0.09, 0.08),
+        "RightUpperLeg": (0, -0.09, 0.92),
+        "RightLowerLeg": (0, -0.09, 0.48),
+        "RightFoot": (0, -0.09, 0.08),
+        "LeftUpperArm": (0, 0.2, 1.4),
+        "LeftForeArm": (0, 0.5, 1.4),
+        "RightUpperArm": (0, -0.2, 1.4),
+        "RightForeArm": (0, -0.5, 1.4),
+    }
     positions = np.array([layout[s] for s in SEGMENTS], dtype=float)
     positions = positions + np.arange(n)[:, None, None] * np.array([0.02, 0.0, 0.0])
     return HumanMotion(

@@ -41,10 +41,15 @@ def _pole(n=3, contacts=(True, False)):
     square = np.array([[-0.3, -0.2, 0], [0.3, -0.2, 0], [0.3, 0.2, 0], [-0.3, 0.2, 0]])
     feet = np.stack([square + [0, 0.5, 0], square - [0, 0.5, 0]])  # large: many pixels
     return Skeleton(
-        title="pole", points=points, bones=np.array([[0, 1], [1, 2]]),
-        bone_colours=["#ff8800", "#ff8800"], path=np.zeros((n, 2)), path_index=np.arange(n),
-        feet=np.tile(feet, (n, 1, 1, 1)), contacts=np.tile(contacts, (n, 1)),
-    )  # fmt: skip
+        title="pole",
+        points=points,
+        bones=np.array([[0, 1], [1, 2]]),
+        bone_colours=["#ff8800", "#ff8800"],
+        path=np.zeros((n, 2)),
+        path_index=np.arange(n),
+        feet=np.tile(feet, (n, 1, 1, 1)),
+        contacts=np.tile(contacts, (n, 1)),
+    )
 
 
 def _near(frame, colour, tol=12):

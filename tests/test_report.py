@@ -26,8 +26,14 @@ from pimann.report.page import (
     write_report,
 )
 
-BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable",
-            "chromium-headless-shell", "chrome-headless-shell")  # fmt: skip
+BROWSERS = (
+    "chromium",
+    "chromium-browser",
+    "google-chrome",
+    "google-chrome-stable",
+    "chromium-headless-shell",
+    "chrome-headless-shell",
+)
 INSTALL_HINT = (
     "no headless browser on PATH (looked for " + ", ".join(BROWSERS) + "); on Debian "
     "`apt-get install -y --no-install-recommends chromium` provides one"
@@ -71,12 +77,23 @@ def study(params, tmp_path_factory):
     (results / "sim_summary.json").write_text(json.dumps(SIM_SUMMARY))
     figures = root / "paper_figures"
     figures.mkdir()
-    for k, path in enumerate((figures / "a.png", figures / "b.png", results / "data_report.png",
-                              results / "command_following.png")):  # fmt: skip
+    for k, path in enumerate(
+        (
+            figures / "a.png",
+            figures / "b.png",
+            results / "data_report.png",
+            results / "command_following.png",
+        )
+    ):
         imageio.imwrite(path, np.full((40, 60 + k, 3), 40 * k, dtype=np.uint8))
     frames = [np.full((64, 96, 3), 20 * k, dtype=np.uint8) for k in range(10)]
-    imageio.mimwrite(results / "sim" / "w10-0-mixed-steering.mp4", frames, fps=10,
-                     codec="libx264", macro_block_size=2)  # fmt: skip
+    imageio.mimwrite(
+        results / "sim" / "w10-0-mixed-steering.mp4",
+        frames,
+        fps=10,
+        codec="libx264",
+        macro_block_size=2,
+    )
     return results, figures
 
 
@@ -87,8 +104,10 @@ def test_report_embeds_everything_and_reaches_nothing(study, params):
     found = attributes(page)
     sources = [(tag, value) for tag, name, value in found if name == "src"]
     assert sorted(tag for tag, _ in sources) == ["img"] * 4 + ["video"]
-    assert all(value.startswith(("data:image/png;base64,", "data:video/mp4;base64,"))
-               for _, value in sources)  # fmt: skip
+    assert all(
+        value.startswith(("data:image/png;base64,", "data:video/mp4;base64,"))
+        for _, value in sources
+    )
     links = [value for _, name, value in found if name in ("href", "src", "srcset", "poster")]
     assert not [v for v in links if re.match(r"\s*(https?:)?//", v, re.IGNORECASE)]
     assert "<script" not in page and "<link" not in page and "@import" not in page
@@ -192,11 +211,21 @@ def test_every_image_and_video_loads_in_a_browser(study, params, tmp_path):
     probed = tmp_path / "probed.html"  # the page plus a script that reports what loaded
     probed.write_text(report.read_text().replace("</body>", PROBE + "</body>"))
     run = subprocess.run(
-        [browser, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
-         f"--user-data-dir={tmp_path / 'profile'}", "--virtual-time-budget=20000",
-         "--dump-dom", probed.as_uri()],
-        capture_output=True, text=True, timeout=120,
-    )  # fmt: skip
+        [
+            browser,
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--no-first-run",
+            f"--user-data-dir={tmp_path / 'profile'}",
+            "--virtual-time-budget=20000",
+            "--dump-dom",
+            probed.as_uri(),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     match = re.search(r'<pre id="probe">(.*?)</pre>', run.stdout, re.DOTALL)
     assert match and match.group(1), run.stderr[-2000:]
     loaded = json.loads(match.group(1))

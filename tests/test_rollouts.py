@@ -70,9 +70,14 @@ def test_rollout_paths_round_trip(tmp_path):
 
 def test_table_models_and_rows():
     frame = pd.DataFrame(
-        {"model": [BASELINE, "w10", "w1", "w10"], "pi_weight": [0.0, 10.0, 1.0, 10.0],
-         "scenario": ["forward"] * 4, "steering": [False, False, False, True], "seed": [0] * 4}
-    )  # fmt: skip
+        {
+            "model": [BASELINE, "w10", "w1", "w10"],
+            "pi_weight": [0.0, 10.0, 1.0, 10.0],
+            "scenario": ["forward"] * 4,
+            "steering": [False, False, False, True],
+            "seed": [0] * 4,
+        }
+    )
     assert pi_models(frame) == {1.0: "w1", 10.0: "w10"}
     assert weight_label(10.0) == "10" and weight_label(0.5) == "0.5"
     assert list(select_rows(frame, "forward", False, model="w10").index) == [1]
@@ -92,9 +97,14 @@ def test_benchmark_scripts_of_the_test_clips_and_a_few_training_clips(tmp_path):
     assert scripts["train_a"] == clip_commands(walking_clip(0.5, 300, "a"))
     assert [c.split for c in benchmark_clips(collection, params)] == [HELD_OUT] * 2 + [TRAINING] * 3
     # no training clip longer than the longest script run anyway (here the test clip's 2 s)
-    brief = dataclasses.replace(params, rollout=dataclasses.replace(
-        params.rollout, scenarios={"step": [MotionSegment(1.0, 0.5, 0.0, 0.0)]},
-        scenario_names=["step"]))  # fmt: skip
+    brief = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(
+            params.rollout,
+            scenarios={"step": [MotionSegment(1.0, 0.5, 0.0, 0.0)]},
+            scenario_names=["step"],
+        ),
+    )
     assert list(benchmark_scripts(brief)) == ["clip_c", "clip_c_mirror", "train_d", "train_b"]
     expected = clip_commands(walking_clip(0.4, 100, "c"))
     assert scripts["clip_c"] == scripts["clip_c_mirror"] == expected
@@ -105,11 +115,14 @@ def test_benchmark_scripts_of_the_test_clips_and_a_few_training_clips(tmp_path):
 
     named = rollout_scripts(params)
     assert list(named) == [*params.rollout.scenario_names, *scripts]
-    one = dataclasses.replace(params, rollout=dataclasses.replace(
-        params.rollout, benchmark_clips=False, benchmark_train_clips=1))  # fmt: skip
+    one = dataclasses.replace(
+        params,
+        rollout=dataclasses.replace(params.rollout, benchmark_clips=False, benchmark_train_clips=1),
+    )
     assert list(rollout_scripts(one)) == [*params.rollout.scenario_names, "train_d", "train_b"]
-    only = dataclasses.replace(params, rollout=dataclasses.replace(
-        one.rollout, benchmark_train_clips=0))  # fmt: skip
+    only = dataclasses.replace(
+        params, rollout=dataclasses.replace(one.rollout, benchmark_train_clips=0)
+    )
     assert list(rollout_scripts(only)) == params.rollout.scenario_names
 
 
@@ -190,7 +203,7 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
                     StandSegment(0.6, True),
                     MotionSegment(0.3, 0.3, 0.0, 0.0),
                 ],
-            },  # fmt: skip
+            },
             scenario_names=["short", "stop"],
             benchmark_clips=False,
             benchmark_train_clips=0,
@@ -205,9 +218,12 @@ def test_run_rollouts_batches_give_the_files_of_generate_file(tmp_path):
     for key in keys:
         batched = read_trajectory(rollout_path(tmp_path, key))
         alone = generate_file(
-            tmp_path / "models" / "w10" / str(key.seed), key.scenario, tmp_path / "alone.h5",
-            key.steering, params,
-        )  # fmt: skip
+            tmp_path / "models" / "w10" / str(key.seed),
+            key.scenario,
+            tmp_path / "alone.h5",
+            key.steering,
+            params,
+        )
         alone = read_trajectory(tmp_path / "alone.h5")
         assert batched.attrs == alone.attrs and batched.source == alone.source
         scripts = {**params.rollout.scenarios, "proto": PROTOCOL.script}
@@ -228,10 +244,11 @@ def test_a_protocol_runs_with_the_rollout_keys_it_sets(tmp_path):
     params = dataclasses.replace(
         params,
         rollout=dataclasses.replace(
-            params.rollout, scenarios={**params.rollout.scenarios, "plain": PROTOCOL.script},
+            params.rollout,
+            scenarios={**params.rollout.scenarios, "plain": PROTOCOL.script},
             protocols={"proto": PROTOCOL},
         ),
-    )  # fmt: skip
+    )
     tiny_models(tmp_path / "models", 10.0, "full", [0])
     unsteered = params.rollout.for_protocol("proto", False)
     assert unsteered.command_blend_tau == 0.0 and unsteered.start_history == "zero"
@@ -250,9 +267,12 @@ def test_a_protocol_runs_with_the_rollout_keys_it_sets(tmp_path):
 
 @pytest.mark.parametrize(
     "meta, message",
-    [("{pi_weight", "not a model's metadata"), ("[1]", "not a model's metadata"),
-     ('{"seed": 0, "variant": "full"}', "metadata lacks 'pi_weight'")],
-)  # fmt: skip
+    [
+        ("{pi_weight", "not a model's metadata"),
+        ("[1]", "not a model's metadata"),
+        ('{"seed": 0, "variant": "full"}', "metadata lacks 'pi_weight'"),
+    ],
+)
 def test_a_broken_meta_or_record_is_named(tmp_path, meta, message):
     """The rollout stage's record of the models, and evaluate's reading of it."""
     folder = tmp_path / "w10" / "0"

@@ -47,9 +47,13 @@ TINY = {
 def _run(command: list[str], cwd: Path) -> str:
     """`command` in `cwd` with the clone's own pimann; its output (stdout and stderr)."""
     env = {
-        **os.environ, "PYTHONPATH": str(cwd), "OMP_NUM_THREADS": "1", "PIMANN_THREADS": "1",
-        "DVC_NO_ANALYTICS": "1", "PIMANN_SHARED": "",
-    }  # fmt: skip
+        **os.environ,
+        "PYTHONPATH": str(cwd),
+        "OMP_NUM_THREADS": "1",
+        "PIMANN_THREADS": "1",
+        "DVC_NO_ANALYTICS": "1",
+        "PIMANN_SHARED": "",
+    }
     env.pop("PIMANN_SHARED")  # the default, ../shared beside the clone, as dvc.yaml tracks it
     done = subprocess.run(command, cwd=cwd, env=env, capture_output=True, text=True, timeout=300)
     output = done.stdout + done.stderr
@@ -63,8 +67,9 @@ def _tiny_origin(origin: Path) -> None:
         (origin / name).parent.mkdir(parents=True, exist_ok=True)
         shutil.copy2(REPO / name, origin / name)
     for package in PACKAGES:
-        shutil.copytree(REPO / package, origin / package,
-                        ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+        shutil.copytree(
+            REPO / package, origin / package, ignore=shutil.ignore_patterns("__pycache__")
+        )
     params = yaml.safe_load((REPO / "params.yaml").read_text())
     params["profiles"]["quick"] = {**(params["profiles"]["quick"] or {}), **TINY}
     params["profile"] = "quick"
@@ -112,8 +117,11 @@ def test_workers_push_trainings_that_a_coordinator_restores_without_training(tmp
     for k, stage in enumerate(stages):
         assert f"Stage '{stage}' is cached - skipping run, checking out outputs" in restored
         worker = clones[f"worker{k}"]
-        for path in (f"models/w{WEIGHTS[k]}/0/model.pt", f"results/stage_times/{stage}.json",
-                     f"results/training/w{WEIGHTS[k]}/seed0.csv"):  # fmt: skip
+        for path in (
+            f"models/w{WEIGHTS[k]}/0/model.pt",
+            f"results/stage_times/{stage}.json",
+            f"results/training/w{WEIGHTS[k]}/seed0.csv",
+        ):
             assert (coordinator / path).read_bytes() == (worker / path).read_bytes(), path
         record = yaml.safe_load((coordinator / f"results/stage_times/{stage}.json").read_text())
         assert record["stage"] == stage and record["wall_s"] > 0  # the worker's run, not one here

@@ -60,8 +60,9 @@ def test_standing_gives_the_mid_feet_point(sim_robot, sim_params, stance):
     reference = com_reference(sim_robot, trajectory, plan, sim_params, times)
     assert reference.shape == (len(times), 2)
     # the standing pose's CoM sits within 0.1 mm of the feet's midpoint
-    np.testing.assert_allclose(reference, np.tile(feet[:, :2].mean(axis=0), (len(times), 1)),
-                               atol=1e-4)  # fmt: skip
+    np.testing.assert_allclose(
+        reference, np.tile(feet[:, :2].mean(axis=0), (len(times), 1)), atol=1e-4
+    )
 
 
 def test_leaning_offset_scaled_forward_kept_sideways(sim_robot, sim_params, stance):
@@ -85,22 +86,25 @@ def test_leaning_offset_scaled_forward_kept_sideways(sim_robot, sim_params, stan
     com = pin.centerOfMass(sim_robot.model, sim_robot.data, q_world)
     soles = [sim_robot.frame_placement(q_world, f) for f in (LEFT_SOLE, RIGHT_SOLE)]
     generated = _mid_feet(
-        np.array([[*s.translation[:2], np.arctan2(s.rotation[1, 0], s.rotation[0, 0])]
-                  for s in soles])
-    )  # fmt: skip
+        np.array(
+            [[*s.translation[:2], np.arctan2(s.rotation[1, 0], s.rotation[0, 0])] for s in soles]
+        )
+    )
     offset = relative(generated, np.array([*com[:2], generated[2]]))[:2]
     assert abs(offset[0]) > 0.015 and abs(offset[1]) > 0.015  # a real lean, both ways
     mid = _mid_feet(robot_feet)
     expected = mid[:2] + rot_z(mid[2])[:2, :2] @ (offset * [sim_params.step_scale, 1.0])
     replaying = (times > plan.hold + 1e-9) & (times < plan.duration - sim_params.end_hold_s)
-    np.testing.assert_allclose(reference[replaying], np.tile(expected, (replaying.sum(), 1)),
-                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(
+        reference[replaying], np.tile(expected, (replaying.sum(), 1)), atol=1e-9
+    )
     # the holds: standing on the mid-feet point, faded in over the hold's last 0.5 s
     before = times < plan.hold - 0.5 - 1e-9
     after = times > plan.duration - sim_params.end_hold_s + 0.5 + 1e-9
     assert before.sum() > 50 and after.sum() > 30
-    np.testing.assert_allclose(reference[before | after], np.tile(mid[:2], (before.sum()
-                               + after.sum(), 1)), atol=1e-12)  # fmt: skip
+    np.testing.assert_allclose(
+        reference[before | after], np.tile(mid[:2], (before.sum() + after.sum(), 1)), atol=1e-12
+    )
     # no step: smoothstep's slope is at most 1.5 / 0.5 s, so 3 % of the offset per 0.01 s knot
     steps = np.linalg.norm(np.diff(reference, axis=0), axis=1)
     scaled = np.linalg.norm(offset * [sim_params.step_scale, 1.0])
@@ -121,8 +125,9 @@ def test_reference_follows_the_generated_walk(sim_robot, sim_params, stepping):
     assert np.linalg.norm(reference - mid, axis=1).max() < half_width
     # it ends where the robot's feet end: 0.4x the source's 0.3 m walk along x
     np.testing.assert_allclose(reference[-1], mid[-1], atol=1e-12)
-    np.testing.assert_allclose(reference[-1] - reference[0], [0.3 * sim_params.step_scale, 0.0],
-                               atol=2e-3)  # fmt: skip
+    np.testing.assert_allclose(
+        reference[-1] - reference[0], [0.3 * sim_params.step_scale, 0.0], atol=2e-3
+    )
     # a knot that replays generated frame j exactly: pinocchio on that frame (walk along +x)
     j = 120
     t = plan.hold + (trajectory.time[j] - trajectory.time[0]) / plan.speed_scale
@@ -163,8 +168,9 @@ def test_simulate_trajectory_plans_with_the_reference(sim_robot, sim_params, sta
     params = dataclasses.replace(sim_params, plan_com_weight=WEIGHT)
     result = simulate_trajectory(trajectory, params, duration=0.02)
     com0 = pin.centerOfMass(sim_robot.model, sim_robot.data, stance[0])
-    np.testing.assert_allclose(result.dcm.com, plan_dcm(plan, params, com0, reference).com,
-                               atol=1e-6)  # fmt: skip
+    np.testing.assert_allclose(
+        result.dcm.com, plan_dcm(plan, params, com0, reference).com, atol=1e-6
+    )
     unweighted = plan_dcm(plan, dataclasses.replace(params, plan_com_weight=0.0), com0)
     assert np.abs(result.dcm.com - unweighted.com).max() > 0.005
 

@@ -41,9 +41,16 @@ def _problem(plan, t: float, params: MpcParams, velocity=(0.0, 0.0, 0.0), com=CO
     nominal = tuple(f.positions.copy() for f in plan.feet)
     reference = np.tile(COM, (knot_count(params) + 1, 1))
     return horizon_problem(
-        plan, nominal, t, params, np.asarray(com, float), np.asarray(velocity, float),
-        np.zeros(3), reference, SOLE_Z,
-    )  # fmt: skip
+        plan,
+        nominal,
+        t,
+        params,
+        np.asarray(com, float),
+        np.asarray(velocity, float),
+        np.zeros(3),
+        reference,
+        SOLE_Z,
+    )
 
 
 def _solve(mpc: CentroidalMPC, problem: MpcProblem) -> MpcSolution:
@@ -204,8 +211,9 @@ def test_a_failed_online_run_is_named_and_the_others_finish(tmp_path, sim_robot,
     write_trajectory(path, walk)
     unsolvable = dataclasses.replace(sim_params.mpc, com_z_min=5.0, com_z_max=5.1)
     no_pushes = dataclasses.replace(sim_params.pushes, rollouts=[])
-    short = dataclasses.replace(sim_params, runs=runs, mpc=unsolvable, zmp_hold_s=0.3,
-                                end_hold_s=0.2, pushes=no_pushes)  # fmt: skip
+    short = dataclasses.replace(
+        sim_params, runs=runs, mpc=unsolvable, zmp_hold_s=0.3, end_hold_s=0.2, pushes=no_pushes
+    )
     params = dataclasses.replace(load_params(), simulate=short)
     record = simulate_runs(rollouts, tmp_path / "sim", tmp_path / "summary.json", params)
     assert record["failed_runs"] == ["w10-0-forward-steering-online"]
@@ -309,8 +317,16 @@ def test_cli_simulates_with_the_online_controller(tmp_path, capsys, sim_robot, s
     plan = stepping_plan(standing_feet(sim_robot, q0), 2, 0.1, single=0.35, double=0.1)
     source = tmp_path / "walk.h5"
     write_trajectory(source, stepping_trajectory(sim_robot, sim_params, plan, 25.0))
-    argv = ["simulate", str(source), "-o", str(tmp_path / "sim.h5"), "--duration", "0.6",
-            "--controller", "online"]  # fmt: skip
+    argv = [
+        "simulate",
+        str(source),
+        "-o",
+        str(tmp_path / "sim.h5"),
+        "--duration",
+        "0.6",
+        "--controller",
+        "online",
+    ]
     assert main(argv) == 0
     summary = json.loads(capsys.readouterr().out)
     assert summary["controller"] == "online" and not summary["fallen"]
@@ -322,8 +338,11 @@ def _horizons(params: MpcParams) -> list[MpcProblem]:
     a frozen footstep."""
     standing = _problem(stepping_plan(FEET, 0, 0.0), 0.0, params)
     plan = stepping_plan(FEET, 2, 0.2)
-    problems = [standing, _problem(plan, 0.3, params, velocity=(0.2, 0.05, 0.0)),
-                _problem(plan, 0.3, params, velocity=(0.5, 0.0, 0.0))]  # fmt: skip
+    problems = [
+        standing,
+        _problem(plan, 0.3, params, velocity=(0.2, 0.05, 0.0)),
+        _problem(plan, 0.3, params, velocity=(0.5, 0.0, 0.0)),
+    ]
     for t, push in ((0.3, 1.5), (0.3, -1.5), (1.1, -1.5)):
         problem = _problem(plan, t, params)
         problem.external_force = np.array([0.0, push, 0.0])

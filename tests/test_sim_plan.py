@@ -159,8 +159,10 @@ def test_turning_footsteps_keep_the_stance_width(sim_robot, sim_params, stance):
         landing, other = got.feet[side], got.feet[1 - side]
         for j in range(1, len(landing)):
             k = got.stance_index(1 - side, landing.t_on[j])
-            offset = relative(np.array([*other.positions[k], other.yaws[k]]),
-                              np.array([*landing.positions[j], landing.yaws[j]]))  # fmt: skip
+            offset = relative(
+                np.array([*other.positions[k], other.yaws[k]]),
+                np.array([*landing.positions[j], landing.yaws[j]]),
+            )
             # lateral offset toward the landing foot's own side, about one stance width
             assert (1 if side == 0 else -1) * offset[1] > 0.8 * width
             checked += 1

@@ -73,8 +73,11 @@ def test_distance_outside_two_feet_hull():
 def test_foot_rectangle_turns_with_yaw():
     corners = foot_rectangle(np.array([1.0, 2.0]), np.pi / 2, 0.1, 0.05)
     assert sorted(map(tuple, np.round(corners, 12))) == [
-        (0.95, 1.9), (0.95, 2.1), (1.05, 1.9), (1.05, 2.1),
-    ]  # fmt: skip
+        (0.95, 1.9),
+        (0.95, 2.1),
+        (1.05, 1.9),
+        (1.05, 2.1),
+    ]
 
 
 def test_zmp_stays_in_support_while_walking(walk, sim_params):
@@ -105,14 +108,26 @@ def test_result_file_round_trip(walk, sim_params, tmp_path):
     np.testing.assert_array_equal(trajectory.com_position, walk.com_world)
     assert trajectory.rate_hz == pytest.approx(sim_params.control_rate_hz)
     assert trajectory.attrs["model"] == "w10" and not trajectory.contacts.all()
-    for name in ("joints_reference", "joints_generated", "com_reference", "zmp_measured",
-                 "zmp_reference", "soles_measured"):  # fmt: skip
+    for name in (
+        "joints_reference",
+        "joints_generated",
+        "com_reference",
+        "zmp_measured",
+        "zmp_reference",
+        "soles_measured",
+    ):
         np.testing.assert_allclose(data[name], getattr(walk, name), rtol=1e-6, atol=1e-6)
     np.testing.assert_array_equal(data["joints_measured"], walk.joints_measured)
     np.testing.assert_array_equal(data["foot_slip"], walk.foot_slip_per_foot)
     assert attrs["fall"] == walk.fallen is False
-    for key in ("success", "distance_walked_m", "joint_rmse_rad", "zmp_outside_max_m",
-                "real_time_factor", "foot_slip_left_m"):  # fmt: skip
+    for key in (
+        "success",
+        "distance_walked_m",
+        "joint_rmse_rad",
+        "zmp_outside_max_m",
+        "real_time_factor",
+        "foot_slip_left_m",
+    ):
         assert attrs[key] == pytest.approx(summary[key])
     assert summary["joint_rmse_rad"] == pytest.approx(
         np.sqrt(np.mean((walk.joints_measured - walk.joints_reference) ** 2))
@@ -183,9 +198,14 @@ def test_render_produces_a_file(walk, sim_params, tmp_path, use_mujoco):
     write_simulation(path, walk, sim_params)
     strip = tmp_path / f"strip-{use_mujoco}.png"
     render_simulation(
-        read_trajectory(path), strip, sim_params, width=160, height=120, strip_frames=3,
+        read_trajectory(path),
+        strip,
+        sim_params,
+        width=160,
+        height=120,
+        strip_frames=3,
         use_mujoco=use_mujoco,
-    )  # fmt: skip
+    )
     picture = iio.imread(strip)
     assert picture.shape[0] == 120 and picture.shape[1] >= 3 * 160
     assert _picture_has_subject(picture)

@@ -65,8 +65,11 @@ def test_no_record_by_hand_by_the_report_or_on_failure(tmp_path, monkeypatch):
 
 def test_the_report_gathers_and_sums(tmp_path):
     folder = tmp_path / "results" / "stage_times"
-    for stage, started, wall in (("train@10", 2000.0, 600.5), ("retarget", 1000.0, 120.25),
-                                 ("report_less", 3000.0, 0.25)):  # fmt: skip
+    for stage, started, wall in (
+        ("train@10", 2000.0, 600.5),
+        ("retarget", 1000.0, 120.25),
+        ("report_less", 3000.0, 0.25),
+    ):
         write_record(folder, stage_record(stage, started, wall, "quick"))
     summary = write_summary(folder, tmp_path / "results" / SUMMARY_FILE)
     assert [r["stage"] for r in summary["stages"]] == ["retarget", "train@10", "report_less"]

@@ -51,8 +51,11 @@ def test_without_standing_frames_the_nominal_pose_is_kept():
 
 def test_a_recorded_pose_of_other_sizes_or_nan_is_refused():
     good = StandingPose.nominal().to_json()
-    for change in ({"joints": [0.1, 0.2]}, {"roll_pitch": [0.0]},
-                   {"roll_pitch": [float("nan"), 0.0]}):  # fmt: skip
+    for change in (
+        {"joints": [0.1, 0.2]},
+        {"roll_pitch": [0.0]},
+        {"roll_pitch": [float("nan"), 0.0]},
+    ):
         with pytest.raises(ValueError, match="standing pose"):
             StandingPose.from_json({**good, **change})
     with pytest.raises(KeyError):

@@ -30,8 +30,9 @@ def solo(tmp_path_factory, sweep_params, dataset_path):
     root = tmp_path_factory.mktemp("solo")
     metas = {}
     for w in WEIGHTS:
-        for seed, meta in train_models(dataset_path, root / f"w{w:g}", w, SEEDS, sweep_params,
-                                       "cpu").items():  # fmt: skip
+        for seed, meta in train_models(
+            dataset_path, root / f"w{w:g}", w, SEEDS, sweep_params, "cpu"
+        ).items():
             metas[SweepMember(w, seed)] = (meta, root / f"w{w:g}" / str(seed))
     return metas
 
@@ -50,8 +51,10 @@ def test_each_member_ends_as_its_weights_own_training(sweep_params, dataset_path
     for member, (meta, folder) in solo.items():
         _assert_member_is_solo(results[member], meta, folder, atol=1e-6)
     # the members differ: own seeds, own weights (w=10's L_B moved it off w=0's path)
-    a, b, c = (results[SweepMember(w, s)]["state_dict"]["expert_weight_0"]
-               for w, s in ((0.0, 0), (0.0, 1), (10.0, 0)))  # fmt: skip
+    a, b, c = (
+        results[SweepMember(w, s)]["state_dict"]["expert_weight_0"]
+        for w, s in ((0.0, 0), (0.0, 1), (10.0, 0))
+    )
     assert (a - b).abs().max() > 1e-3 and (a - c).abs().max() > 1e-5
     rows = results[SweepMember(10.0, 0)]["history"]
     assert [r["epoch"] for r in rows] == [1, 2, 3, 4] and rows[-1]["train_pi"] > 0
@@ -67,18 +70,28 @@ def test_a_bfloat16_sweep_ends_as_the_bfloat16_trainings(tmp_path, sweep_params,
     metas = train_models(dataset_path, tmp_path / "w10", 10.0, SEEDS, bf16, "cpu")
     for seed, meta in metas.items():
         assert meta["precision"] == "bfloat16"
-        _assert_member_is_solo(results[SweepMember(10.0, seed)], meta, tmp_path / "w10" / str(seed),
-                               atol=1e-5)  # fmt: skip
+        _assert_member_is_solo(
+            results[SweepMember(10.0, seed)], meta, tmp_path / "w10" / str(seed), atol=1e-5
+        )
 
 
 def test_an_interrupted_sweep_resumes_exactly(tmp_path, sweep_params, dataset_path):
     checkpoint = tmp_path / "sweep.pt"
     straight = train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cpu", progress=None)
-    stopped = train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cpu", checkpoint=checkpoint,
-                          stop_after=2, progress=None)  # fmt: skip
+    stopped = train_sweep(
+        dataset_path,
+        WEIGHTS,
+        SEEDS,
+        sweep_params,
+        "cpu",
+        checkpoint=checkpoint,
+        stop_after=2,
+        progress=None,
+    )
     assert stopped is None and checkpoint.is_file()
-    resumed = train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cpu", checkpoint=checkpoint,
-                          progress=None)  # fmt: skip
+    resumed = train_sweep(
+        dataset_path, WEIGHTS, SEEDS, sweep_params, "cpu", checkpoint=checkpoint, progress=None
+    )
     for member, result in straight.items():
         for name, value in result["state_dict"].items():
             assert torch.equal(resumed[member]["state_dict"][name], value), (member, name)
@@ -87,8 +100,15 @@ def test_an_interrupted_sweep_resumes_exactly(tmp_path, sweep_params, dataset_pa
 
 def test_the_stages_write_each_weight_out_of_one_sweep(tmp_path, sweep_params, dataset_path, solo):
     models = tmp_path / "models"
-    metas = train_from_sweep(dataset_path, models / "w0", 0, WEIGHTS, sweep_params, "cpu",
-                             plots_dir=tmp_path / "plots" / "w0")  # fmt: skip
+    metas = train_from_sweep(
+        dataset_path,
+        models / "w0",
+        0,
+        WEIGHTS,
+        sweep_params,
+        "cpu",
+        plots_dir=tmp_path / "plots" / "w0",
+    )
     assert (models / SWEEP_DIR).is_dir()  # kept for w=10's stage
     train_from_sweep(dataset_path, models / "w10", 10, WEIGHTS, sweep_params, "cpu")
     assert not (models / SWEEP_DIR).exists()  # every weight is out
@@ -119,17 +139,21 @@ def test_what_the_sweep_cannot_do_is_refused(tmp_path, sweep_params, dataset_pat
 def test_the_cuda_graph_trains_as_the_eager_step_and_the_solo_training(
     tmp_path, sweep_params, dataset_path
 ):
-    graphed = train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cuda", graph=True,
-                          progress=None)  # fmt: skip
-    eager = train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cuda", graph=False,
-                        progress=None)  # fmt: skip
+    graphed = train_sweep(
+        dataset_path, WEIGHTS, SEEDS, sweep_params, "cuda", graph=True, progress=None
+    )
+    eager = train_sweep(
+        dataset_path, WEIGHTS, SEEDS, sweep_params, "cuda", graph=False, progress=None
+    )
     for member, result in eager.items():
         for name, value in result["state_dict"].items():
-            torch.testing.assert_close(graphed[member]["state_dict"][name], value, rtol=0,
-                                       atol=1e-5)  # fmt: skip
+            torch.testing.assert_close(
+                graphed[member]["state_dict"][name], value, rtol=0, atol=1e-5
+            )
         assert graphed[member]["best_epoch"] == result["best_epoch"]
     for w in WEIGHTS:
         metas = train_models(dataset_path, tmp_path / f"w{w:g}", w, SEEDS, sweep_params, "cuda")
         for seed, meta in metas.items():
-            _assert_member_is_solo(graphed[SweepMember(w, seed)], meta,
-                                   tmp_path / f"w{w:g}" / str(seed), atol=1e-5)  # fmt: skip
+            _assert_member_is_solo(
+                graphed[SweepMember(w, seed)], meta, tmp_path / f"w{w:g}" / str(seed), atol=1e-5
+            )

@@ -37,8 +37,13 @@ def test_class_response_reports_the_data_velocity_per_class(tmp_path):
     small = ModelParams(2, 8, 2, 16, 2, 0.0, "elu")
     torch.manual_seed(0)
     model = MANN(dataset.layout.input_dim, dataset.layout.output_dim, small, seeds=[0])
-    meta = {"pi_weight": 0.0, "seed": 0, "variant": "full", "dataset": str(dataset_path),
-            "params": {"model": dataclasses.asdict(small)}}  # fmt: skip
+    meta = {
+        "pi_weight": 0.0,
+        "seed": 0,
+        "variant": "full",
+        "dataset": str(dataset_path),
+        "params": {"model": dataclasses.asdict(small)},
+    }
     save_model(tmp_path / "w0" / "0", model, dataset.layout, dataset.stats, meta)
     table = class_response(tmp_path / "w0", collection, samples=500)
     assert set(table["split"]) == {"train", "test"}

@@ -43,8 +43,9 @@ def test_schedule_and_order():
 
 def test_training_is_deterministic_resumes_exactly_and_learns(tmp_path, params, dataset_path):
     seeds = [0, 1]
-    straight = train_models(dataset_path, tmp_path / "a", 1.0, seeds, params, "cpu",
-                            plots_dir=tmp_path / "plots_a")  # fmt: skip
+    straight = train_models(
+        dataset_path, tmp_path / "a", 1.0, seeds, params, "cpu", plots_dir=tmp_path / "plots_a"
+    )
     again = train_models(dataset_path, tmp_path / "b", 1.0, seeds, params, "cpu")
     # interrupted after 2 epochs, then resumed to 4
     assert train_models(dataset_path, tmp_path / "c", 1.0, seeds, params, "cpu", stop_after=2) == {}
@@ -56,8 +57,9 @@ def test_training_is_deterministic_resumes_exactly_and_learns(tmp_path, params, 
         for name in a:
             assert torch.equal(a[name], b[name]), name
             torch.testing.assert_close(a[name], c[name], rtol=1e-6, atol=1e-7)
-        assert straight[seed]["best_epoch"] == again[seed]["best_epoch"] == resumed[seed][
-            "best_epoch"]  # fmt: skip
+        assert (
+            straight[seed]["best_epoch"] == again[seed]["best_epoch"] == resumed[seed]["best_epoch"]
+        )
     # members differ (own init and data order), and the loss went down
     assert not torch.equal(*(_weights(tmp_path / "a" / str(s))["expert_weight_0"] for s in seeds))
     with (tmp_path / "plots_a" / "seed0.csv").open() as file:
@@ -93,8 +95,9 @@ def test_pi_term_enters_the_gradient(params, dataset_path):
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
-    loss = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
-                        pi_gradient="both")  # fmt: skip
+    loss = TrainingLoss(
+        data.layout, data.stats, cpu, pi_configuration="predicted", pi_gradient="both"
+    )
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0]).eval()
     x = torch.as_tensor(data.x_train[None, :32])
     y = torch.as_tensor(data.y_train[None, :32])
@@ -110,8 +113,9 @@ def test_pi_term_enters_the_gradient(params, dataset_path):
     g0, g10 = gradient(0.0), gradient(10.0)
     assert not torch.allclose(g0, g10)
     # the ground-truth configuration variant changes the PI gradient, not the value's sign
-    truth = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="ground_truth",
-                         pi_gradient="both")  # fmt: skip
+    truth = TrainingLoss(
+        data.layout, data.stats, cpu, pi_configuration="ground_truth", pi_gradient="both"
+    )
     with torch.no_grad():
         pred = model(x)
         assert truth(pred, y)[1] > 0 and loss(pred, y)[1] > 0
@@ -156,10 +160,12 @@ def test_pi_gradient_moves_only_the_chosen_side(dataset_path, side):
 
     data = read_dataset(dataset_path)
     cpu = torch.device("cpu")
-    loss = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
-                        pi_gradient=side)  # fmt: skip
-    both = TrainingLoss(data.layout, data.stats, cpu, pi_configuration="predicted",
-                        pi_gradient="both")  # fmt: skip
+    loss = TrainingLoss(
+        data.layout, data.stats, cpu, pi_configuration="predicted", pi_gradient=side
+    )
+    both = TrainingLoss(
+        data.layout, data.stats, cpu, pi_configuration="predicted", pi_gradient="both"
+    )
     model = MANN.from_seeds(130, 100, SMALL_MODEL, [0]).eval()
     x = torch.as_tensor(data.x_train[None, :16])
     prediction = model(x).detach().requires_grad_(True)

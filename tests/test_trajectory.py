@@ -82,9 +82,13 @@ def test_nan_is_named_with_frame(rng):
     joints[7, 3] = np.nan
     with pytest.raises(PimannError, match=r"clip_001 \(frame 7\): joint_positions holds NaN"):
         Trajectory(
-            trajectory.time, trajectory.base_position, trajectory.base_quaternion_xyzw, joints,
-            "clip_001", 50.0,
-        )  # fmt: skip
+            trajectory.time,
+            trajectory.base_position,
+            trajectory.base_quaternion_xyzw,
+            joints,
+            "clip_001",
+            50.0,
+        )
 
 
 def test_not_hdf5_and_truncated(tmp_path, rng):

@@ -136,18 +136,28 @@ def build_manifest(params: Any, shared: Path | None = None) -> list[Group]:
     mesh_dir = robots / MESH_DIRS["simulation"]
     meshes = sorted({mesh_dir / Path(name).name for name in _mesh_names(simulation_urdf)})
     groups = [
-        Group(ROBOT, "pimann.core.robot.load_robot('retarget'): pinocchio reads the URDF alone",
-              files([robots / MODEL_FILES["retarget"]])),
-        Group(SIMULATION, "pimann.sim.model (MuJoCo) and load_robot('simulation'): the URDF "
-              "and the meshes it names", files([simulation_urdf, *meshes])),
-    ]  # fmt: skip
+        Group(
+            ROBOT,
+            "pimann.core.robot.load_robot('retarget'): pinocchio reads the URDF alone",
+            files([robots / MODEL_FILES["retarget"]]),
+        ),
+        Group(
+            SIMULATION,
+            "pimann.sim.model (MuJoCo) and load_robot('simulation'): the URDF "
+            "and the meshes it names",
+            files([simulation_urdf, *meshes]),
+        ),
+    ]
     for key, source in params.data.sources.items():
         takes = shared_glob(source.path, shared)
         if not takes:
             raise PimannError(source.path, f"data.sources.{key}: the glob matches no file")
         labelled = source.labels == "bandai_namco"
-        read = [p for take in takes for p in ((take, *bandai_label_files(take)) if labelled
-                                              else (take,))]  # fmt: skip
+        read = [
+            p
+            for take in takes
+            for p in ((take, *bandai_label_files(take)) if labelled else (take,))
+        ]
         about = f"the retarget stage: data.sources.{key}" + (" and its labels" if labelled else "")
         groups.append(Group(f"{MOCAP_PREFIX}{key}", about, files(read), source.path))
     return groups

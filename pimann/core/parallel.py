@@ -87,7 +87,9 @@ def pool_map(
     if workers <= 1 or len(jobs) <= 1:
         return collect(map(function, jobs))
     with ProcessPoolExecutor(
-        workers, mp_context=get_context("spawn"), initializer=worker_logging,
+        workers,
+        mp_context=get_context("spawn"),
+        initializer=worker_logging,
         initargs=(logging_levels(),),
-    ) as pool:  # fmt: skip
+    ) as pool:
         return collect(pool.map(function, jobs))

@@ -233,9 +233,14 @@ def _fields_of(value: Any) -> Any:
 
 # the rollout keys a protocol may set (the rest of `rollout` holds for it too)
 PROTOCOL_KEYS = (
-    "k0", "k1", "goal_factor", "goal_radius", "command_blend_tau", "planar_steering",
+    "k0",
+    "k1",
+    "goal_factor",
+    "goal_radius",
+    "command_blend_tau",
+    "planar_steering",
     "start_history",
-)  # fmt: skip
+)
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -265,7 +270,7 @@ class RolloutParams:
     start_history: Literal["zero", "command"]  # velocity windows at a start (generate.py)
     scenarios: dict[Str, list[_Command]]
     scenario_names: list[Str]  # the scenarios the DVC rollout stage generates
-    # the command-following benchmark: also roll out each test clip's script (pimann.generate.benchmark_clips)
+    # the command-following benchmark: each test clip's script (pimann.generate.benchmark_clips)
     benchmark_clips: Bool
     # ... and this many training clips' per motion class (in-distribution level); 0: none
     benchmark_train_clips: NonNegativeInt
@@ -522,8 +527,10 @@ def _check_references(params: Params) -> None:
             raise _unknown(f"data.sources.{name}.skeleton", item.skeleton, known)
     if params.features.window not in params.features.windows:
         raise _unknown("features.window", params.features.window, sorted(params.features.windows))
-    for key, values in (("train.seeds", params.train.seeds),
-                        ("train.pi_weights", params.train.pi_weights)):  # fmt: skip
+    for key, values in (
+        ("train.seeds", params.train.seeds),
+        ("train.pi_weights", params.train.pi_weights),
+    ):
         if not values or len(set(values)) != len(values):
             raise _fail(f"{key} must be a non-empty list without repeats")
     scenarios = sorted(params.rollout.scenarios)
@@ -541,13 +548,17 @@ def _check_references(params: Params) -> None:
         for k, weight in enumerate(getattr(evaluate, key)):
             if weight not in weights:
                 raise _unknown(f"evaluate.{key}.{k}", weight, weights)
-    runs = {"simulate.pushes.rollouts": params.simulate.pushes.rollouts,
-            "simulate.runs": params.simulate.runs}  # fmt: skip
+    runs = {
+        "simulate.pushes.rollouts": params.simulate.pushes.rollouts,
+        "simulate.runs": params.simulate.runs,
+    }
     for where, items in runs.items():
         for k, run in enumerate(items):
-            for name, value, known in (("model", run.model, model_names(params)),
-                                       ("seed", run.seed, params.train.seeds),
-                                       ("scenario", run.scenario, rolled_out)):  # fmt: skip
+            for name, value, known in (
+                ("model", run.model, model_names(params)),
+                ("seed", run.seed, params.train.seeds),
+                ("scenario", run.scenario, rolled_out),
+            ):
                 if value not in known:
                     raise _unknown(f"{where}.{k}.{name}", value, known)
 
@@ -617,8 +628,12 @@ def _bound(kind: Any) -> str | None:
 
 
 _TYPE_NAMES = {"int_type": "int", "float_type": "float", "bool_type": "bool", "string_type": "str"}
-_BOUNDS = {"greater_than": "gt", "greater_than_equal": "ge", "less_than": "lt",
-           "less_than_equal": "le"}  # fmt: skip
+_BOUNDS = {
+    "greater_than": "gt",
+    "greater_than_equal": "ge",
+    "less_than": "lt",
+    "less_than_equal": "le",
+}
 
 
 def _problem(error: Any) -> str:

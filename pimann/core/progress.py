@@ -88,10 +88,16 @@ class Progress:
     def _log(self, line: str, now: float) -> None:
         self.logger.info(
             tqdm.format_meter(
-                self.n, self.total, now - self.started, prefix=self.desc, unit=self.unit,
-                bar_format=line, postfix=self.postfix, initial=self.initial,
+                self.n,
+                self.total,
+                now - self.started,
+                prefix=self.desc,
+                unit=self.unit,
+                bar_format=line,
+                postfix=self.postfix,
+                initial=self.initial,
             )
-        )  # fmt: skip
+        )
         self.reported = True
 
     def __enter__(self) -> Progress:

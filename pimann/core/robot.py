@@ -17,37 +17,88 @@ from pimann.core.errors import PimannError
 from pimann.core.paths import robots_dir
 
 JOINT_NAMES: tuple[str, ...] = (
-    "l_hip_pitch", "l_hip_roll", "l_hip_yaw", "l_knee", "l_ankle_pitch", "l_ankle_roll",
-    "r_hip_pitch", "r_hip_roll", "r_hip_yaw", "r_knee", "r_ankle_pitch", "r_ankle_roll",
-    "torso_pitch", "torso_roll", "torso_yaw",
-    "neck_pitch", "neck_roll", "neck_yaw",
-    "l_shoulder_pitch", "l_shoulder_roll", "l_shoulder_yaw", "l_elbow",
-    "r_shoulder_pitch", "r_shoulder_roll", "r_shoulder_yaw", "r_elbow",
-)  # fmt: skip
+    "l_hip_pitch",
+    "l_hip_roll",
+    "l_hip_yaw",
+    "l_knee",
+    "l_ankle_pitch",
+    "l_ankle_roll",
+    "r_hip_pitch",
+    "r_hip_roll",
+    "r_hip_yaw",
+    "r_knee",
+    "r_ankle_pitch",
+    "r_ankle_roll",
+    "torso_pitch",
+    "torso_roll",
+    "torso_yaw",
+    "neck_pitch",
+    "neck_roll",
+    "neck_yaw",
+    "l_shoulder_pitch",
+    "l_shoulder_roll",
+    "l_shoulder_yaw",
+    "l_elbow",
+    "r_shoulder_pitch",
+    "r_shoulder_roll",
+    "r_shoulder_yaw",
+    "r_elbow",
+)
 N_JOINTS = len(JOINT_NAMES)
 # indices of the 12 leg joints (hips, knees, ankles) in JOINT_NAMES, for gait diagnostics
 LEG_JOINTS = [
     k for k, name in enumerate(JOINT_NAMES) if name[2:].startswith(("hip", "knee", "ankle"))
 ]
 
-STANDING_JOINTS = np.array([
-    -0.1092, 0.0189, 0.0716, -0.0714, -0.0932, -0.0208,
-    -0.1051, 0.0326, 0.0739, -0.0879, -0.1038, -0.0337,
-    0.1519, 0.0003, -0.0079,
-    -0.0007, -0.0017, -0.0009,
-    -0.0355, 0.1000, -0.2207, 0.0450,
-    -0.0415, 0.1000, -0.2240, 0.0455,
-])  # fmt: skip
+STANDING_JOINTS = np.array(
+    [
+        -0.1092,
+        0.0189,
+        0.0716,
+        -0.0714,
+        -0.0932,
+        -0.0208,
+        -0.1051,
+        0.0326,
+        0.0739,
+        -0.0879,
+        -0.1038,
+        -0.0337,
+        0.1519,
+        0.0003,
+        -0.0079,
+        -0.0007,
+        -0.0017,
+        -0.0009,
+        -0.0355,
+        0.1000,
+        -0.2207,
+        0.0450,
+        -0.0415,
+        0.1000,
+        -0.2240,
+        0.0455,
+    ]
+)
 STANDING_BASE_HEIGHT = 0.7748
 STANDING_BASE_QUATERNION_XYZW = np.array([0.0, -0.0399893, 0.0, 0.9992001])
 
 # The 13 XSens segments the study uses; each has a `data_<Segment>` frame on the xsens model.
 SEGMENTS: tuple[str, ...] = (
-    "Pelvis", "T8", "Head",
-    "LeftUpperLeg", "LeftLowerLeg", "LeftFoot",
-    "RightUpperLeg", "RightLowerLeg", "RightFoot",
-    "LeftUpperArm", "LeftForeArm", "RightUpperArm", "RightForeArm",
-)  # fmt: skip
+    "Pelvis",
+    "T8",
+    "Head",
+    "LeftUpperLeg",
+    "LeftLowerLeg",
+    "LeftFoot",
+    "RightUpperLeg",
+    "RightLowerLeg",
+    "RightFoot",
+    "LeftUpperArm",
+    "LeftForeArm",
+    "RightUpperArm",
+    "RightForeArm",
+)
 
 BASE_FRAME = "root_link"
 LEFT_SOLE = "l_sole"

@@ -177,11 +177,17 @@ def rollout_columns(
         seed = seeds[key.model].get(str(key.seed))
         if seed is None:
             raise PimannError(record_path, f"no record of seed {key.seed}")
-        columns.append({
-            "model": key.model, "variant": seed["variant"], "pi_weight": seed["pi_weight"],
-            "seed": key.seed, "scenario": key.scenario, "steering": key.steering,
-            "rollout": str(Path(path).relative_to(root)),
-        })  # fmt: skip
+        columns.append(
+            {
+                "model": key.model,
+                "variant": seed["variant"],
+                "pi_weight": seed["pi_weight"],
+                "seed": key.seed,
+                "scenario": key.scenario,
+                "steering": key.steering,
+                "rollout": str(Path(path).relative_to(root)),
+            }
+        )
     return columns
 
 

@@ -38,10 +38,21 @@ from pimann.evaluate.data_reference import reference_value
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
 
 __all__ = [
-    "C1_FACTOR", "FAILS", "HOLDS", "NOT_COMPARABLE", "POSITION",
-    "REFERENCE", "RULES", "STANDS_STILL", "VELOCITY", "WITHIN_SPREAD", "Claim",
-    "claims_markdown", "data_claim", "evaluate_claims",
-]  # fmt: skip
+    "C1_FACTOR",
+    "FAILS",
+    "HOLDS",
+    "NOT_COMPARABLE",
+    "POSITION",
+    "REFERENCE",
+    "RULES",
+    "STANDS_STILL",
+    "VELOCITY",
+    "WITHIN_SPREAD",
+    "Claim",
+    "claims_markdown",
+    "data_claim",
+    "evaluate_claims",
+]
 
 
 HOLDS, FAILS, NOT_COMPARABLE = "holds", "does not hold", "not comparable"
@@ -250,15 +261,23 @@ def data_claim(reference: dict[str, Any] | None) -> Claim | None:
         )
     differences = reference.get("joint_velocities") == "differences"
     return Claim(
-        "D", reference.get("label", "data"), "- (the authors' data is not public)", RMSE_FIGURE,
-        "; ".join(parts), REFERENCE,
+        "D",
+        reference.get("label", "data"),
+        "- (the authors' data is not public)",
+        RMSE_FIGURE,
+        "; ".join(parts),
+        REFERENCE,
         f"per clip: contact-masked RMS (evaluate rule) over forward-walking frames, per "
         f"{reference.get('frames')} frames; median over clips with >= "
         f"{reference.get('min_forward_frames')} forward frames"
-        + ("; the data's joint velocities: the joints' first differences (the authors' "
-           "metric) or central ones (ours)" if differences else ""),
+        + (
+            "; the data's joint velocities: the joints' first differences (the authors' "
+            "metric) or central ones (ours)"
+            if differences
+            else ""
+        ),
         f"{VELOCITY} and {POSITION}",
-    )  # fmt: skip
+    )
 
 
 def claims_markdown(
@@ -286,10 +305,18 @@ def claims_markdown(
     ]
     row = data_claim(reference)
     rows = [
-        [c.id, c.claim, c.paper, c.metric, c.ours,
-         f"paper_figures/{c.figure}.pdf" if c.figure != "-" else "-", f"**{c.status}**", c.reason]
+        [
+            c.id,
+            c.claim,
+            c.paper,
+            c.metric,
+            c.ours,
+            f"paper_figures/{c.figure}.pdf" if c.figure != "-" else "-",
+            f"**{c.status}**",
+            c.reason,
+        ]
         for c in ([row] if row else []) + list(claims)
-    ]  # fmt: skip
+    ]
     cells = [[text.replace("|", "\\|").replace("\n", " ") for text in r] for r in rows]
     return "\n".join(head + [f"| {' | '.join(r)} |" for r in cells]) + "\n"
 
@@ -333,9 +360,12 @@ def _rmse(kind: str) -> str:
 
 def _baseline_magnitude(data: SeedData) -> Claim:
     claim = Claim(
-        "C1", "Baseline support-foot sliding: total RMSE 22.88 (linear), 17.74 (angular)",
-        "Sec. IV-A: 22.88 m/s, 17.74 rad/s", RMSE_FIGURE, metric=VELOCITY,
-    )  # fmt: skip
+        "C1",
+        "Baseline support-foot sliding: total RMSE 22.88 (linear), 17.74 (angular)",
+        "Sec. IV-A: 22.88 m/s, 17.74 rad/s",
+        RMSE_FIGURE,
+        metric=VELOCITY,
+    )
     baseline = data.baseline
     linear = data.values(baseline, False, _rmse("linear"))
     angular = data.values(baseline, False, _rmse("angular"))
@@ -357,12 +387,21 @@ def _baseline_magnitude(data: SeedData) -> Claim:
         )
     still = data.still_seeds(baseline, False)
     claim = dataclasses.replace(
-        claim, ours=text, status=FAILS if off else HOLDS,
-        reason=(f"{', '.join(off)} the paper's: outside a factor {C1_FACTOR:g}" if off
-                else f"both within a factor {C1_FACTOR:g} of the paper's")
-        + (f"; measured on {baseline} seeds {', '.join(map(str, still))} that do not walk "
-           "(travel < walk_distance or no steps)" if off and still else ""),
-    )  # fmt: skip
+        claim,
+        ours=text,
+        status=FAILS if off else HOLDS,
+        reason=(
+            f"{', '.join(off)} the paper's: outside a factor {C1_FACTOR:g}"
+            if off
+            else f"both within a factor {C1_FACTOR:g} of the paper's"
+        )
+        + (
+            f"; measured on {baseline} seeds {', '.join(map(str, still))} that do not walk "
+            "(travel < walk_distance or no steps)"
+            if off and still
+            else ""
+        ),
+    )
     return stands_still(data, claim, [(baseline, False)])
 
 
@@ -372,8 +411,10 @@ def _lower_than_baseline(data: SeedData, evaluate: EvaluateParams, kind: str) ->
         "C2" if kind == "linear" else "C3",
         f"PI models slide less than the baseline ({kind} total RMSE) for all w in "
         f"{{{', '.join(weight_label(w) for w in weights)}}}",
-        f"Fig. pi_weight_comparison_plot ({kind})", RMSE_FIGURE, metric=VELOCITY,
-    )  # fmt: skip
+        f"Fig. pi_weight_comparison_plot ({kind})",
+        RMSE_FIGURE,
+        metric=VELOCITY,
+    )
     baseline = data.values(data.baseline, False, _rmse(kind))
     values = {w: data.values(data.model(w), False, _rmse(kind)) for w in weights}
     if not len(baseline) or any(not len(v) for v in values.values()):
@@ -382,13 +423,16 @@ def _lower_than_baseline(data: SeedData, evaluate: EvaluateParams, kind: str) ->
     status = combine(orders.values())
     weak = [weight_label(w) for w, s in orders.items() if s == status]
     claim = dataclasses.replace(
-        claim, status=status,
+        claim,
+        status=status,
         ours=f"{data.baseline} {span(baseline)}; "
         + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items()),
-        reason="every seed below every baseline seed" if status == HOLDS
+        reason="every seed below every baseline seed"
+        if status == HOLDS
         else f"w={', '.join(weak)}: seed ranges overlap the baseline's"
-        if status == WITHIN_SPREAD else f"w={', '.join(weak)}: median not below the baseline",
-    )  # fmt: skip
+        if status == WITHIN_SPREAD
+        else f"w={', '.join(weak)}: median not below the baseline",
+    )
     if kind == "linear":
         cause = velocity_level_cause(data, weights) if status != HOLDS else ""
         claim = dataclasses.replace(
@@ -407,9 +451,12 @@ def _reduction(data: SeedData, weights: Sequence[float], kind: str) -> float | N
 
 def _especially_angular(data: SeedData, evaluate: EvaluateParams) -> Claim:
     claim = Claim(
-        "C4", "The reduction is largest for the angular velocities",
-        "Sec. IV-A, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
-    )  # fmt: skip
+        "C4",
+        "The reduction is largest for the angular velocities",
+        "Sec. IV-A, Fig. pi_weight_comparison_plot",
+        RMSE_FIGURE,
+        metric=VELOCITY,
+    )
     linear = _reduction(data, evaluate.box_weights, "linear")
     angular = _reduction(data, evaluate.box_weights, "angular")
     if linear is None or angular is None:
@@ -426,10 +473,12 @@ def _especially_angular(data: SeedData, evaluate: EvaluateParams) -> Claim:
     else:
         status, reason = FAILS, "linear reduced at least as much"
     claim = dataclasses.replace(
-        claim, status=status, reason=reason,
+        claim,
+        status=status,
+        reason=reason,
         ours=f"mean relative reduction of the seed medians vs baseline: linear {linear:.0%}, "
         f"angular {angular:.0%}",
-    )  # fmt: skip
+    )
     return stands_still(data, claim, [(data.model(w), False) for w in evaluate.box_weights])
 
 
@@ -437,27 +486,40 @@ def _decreasing_up_to(data: SeedData, evaluate: EvaluateParams) -> Claim:
     pi_weight = evaluate.pi_weight
     weights = sorted(w for w in evaluate.box_weights if w <= pi_weight)
     claim = Claim(
-        "C5", f"Sliding decreases as w grows up to w={weight_label(pi_weight)}",
-        "Sec. IV-C2, Fig. pi_weight_comparison_plot", RMSE_FIGURE, metric=VELOCITY,
-    )  # fmt: skip
+        "C5",
+        f"Sliding decreases as w grows up to w={weight_label(pi_weight)}",
+        "Sec. IV-C2, Fig. pi_weight_comparison_plot",
+        RMSE_FIGURE,
+        metric=VELOCITY,
+    )
     parts, orders = [], {}
     for kind in ("linear", "angular"):
         values = [data.values(data.model(w), False, _rmse(kind)) for w in weights]
         if any(not len(v) for v in values) or len(values) < 2:
             return missing(claim, f"w in {weights}")
-        parts.append(f"{kind}: " + ", ".join(
-            f"w={weight_label(w)}: {span(v)}" for w, v in zip(weights, values, strict=True)
-        ))  # fmt: skip
+        parts.append(
+            f"{kind}: "
+            + ", ".join(
+                f"w={weight_label(w)}: {span(v)}" for w, v in zip(weights, values, strict=True)
+            )
+        )
         orders[kind] = combine(order(b, a) for a, b in zip(values, values[1:], strict=False))
     status = combine(orders.values())
     failing = [k for k, s in orders.items() if s == status]
     claim = dataclasses.replace(
-        claim, ours="; ".join(parts), status=status,
-        reason="each w's seeds below the previous w's, both parts" if status == HOLDS
+        claim,
+        ours="; ".join(parts),
+        status=status,
+        reason="each w's seeds below the previous w's, both parts"
+        if status == HOLDS
         else f"{' and '.join(failing)}: "
-        + ("medians decrease, seed ranges overlap" if status == WITHIN_SPREAD
-           else "medians not strictly decreasing") + _without_physics(data, weights[0]),
-    )  # fmt: skip
+        + (
+            "medians decrease, seed ranges overlap"
+            if status == WITHIN_SPREAD
+            else "medians not strictly decreasing"
+        )
+        + _without_physics(data, weights[0]),
+    )
     return stands_still(data, claim, [(data.model(w), False) for w in weights[1:]])
 
 
@@ -466,8 +528,10 @@ def _without_physics(data: SeedData, smallest: float) -> str:
     the reduction the claims credit to the physics term comes without it ('' otherwise)."""
     if smallest != 0:
         return ""
-    pairs = [(data.median(data.model(0), False, _rmse(k)), data.median(data.baseline, False,
-              _rmse(k))) for k in ("linear", "angular")]  # fmt: skip
+    pairs = [
+        (data.median(data.model(0), False, _rmse(k)), data.median(data.baseline, False, _rmse(k)))
+        for k in ("linear", "angular")
+    ]
     if any(a is None or b is None or a >= b for a, b in pairs):
         return ""
     (lin, lin_b), (ang, ang_b) = pairs
@@ -487,9 +551,12 @@ WALK_METRIC = (
 def _compared_walk(data: SeedData, evaluate: EvaluateParams) -> Claim:
     weights = evaluate.box_weights
     claim = Claim(
-        "C6", "Models with w in the comparison walk without steering (implied)",
-        "Sec. IV-C2 (only w=100 is said not to walk)", "base_displacement", metric=WALK_METRIC,
-    )  # fmt: skip
+        "C6",
+        "Models with w in the comparison walk without steering (implied)",
+        "Sec. IV-C2 (only w=100 is said not to walk)",
+        "base_displacement",
+        metric=WALK_METRIC,
+    )
     fractions = {w: data.walk_fraction(w, False) for w in weights}
     if any(v is None for v in fractions.values()):
         return missing(claim, "a weight")
@@ -510,8 +577,10 @@ def _large_weight_walks(data: SeedData, evaluate: EvaluateParams, steering: bool
     claim = Claim(
         "C8" if steering else "C7",
         f"w={w} models {'walk with' if steering else 'cannot walk without'} steering",
-        "Sec. IV-C2", "base_displacement", metric=WALK_METRIC,
-    )  # fmt: skip
+        "Sec. IV-C2",
+        "base_displacement",
+        metric=WALK_METRIC,
+    )
     fraction = data.walk_fraction(evaluate.large_weight, steering)
     if fraction is None:
         return missing(claim, f"w={w}")
@@ -528,10 +597,12 @@ def _large_weight_walks(data: SeedData, evaluate: EvaluateParams, steering: bool
 
 def _foot_pitch_grows(data: SeedData, evaluate: EvaluateParams, pi_gradient: str) -> Claim:
     claim = Claim(
-        "C9", "Foot pitch in contact grows with w (heel-only stance at large w)",
-        "Sec. IV-C2, Fig. foot_rotations", "foot_rotations",
+        "C9",
+        "Foot pitch in contact grows with w (heel-only stance at large w)",
+        "Sec. IV-C2, Fig. foot_rotations",
+        "foot_rotations",
         metric="max |sole pitch| in contact (poses)",
-    )  # fmt: skip
+    )
     metric = "contact_sole_pitch_max_abs"
     values = {w: data.values(data.model(w), evaluate.foot_steering, metric) for w in data.models}
     values = {w: v for w, v in sorted(values.items()) if len(v)}
@@ -543,22 +614,28 @@ def _foot_pitch_grows(data: SeedData, evaluate: EvaluateParams, pi_gradient: str
     rho = float(spearmanr(list(medians), list(medians.values())).statistic)
     ends = list(values.values())
     status = order(ends[0], ends[-1]) if rho >= 0.8 else FAILS
-    reason = {HOLDS: "grows with w (rho >= 0.8), largest w's seeds above the smallest w's",
-              WITHIN_SPREAD: "medians grow (rho >= 0.8), end seed ranges overlap"}.get(
-        status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)"
-    )  # fmt: skip
+    reason = {
+        HOLDS: "grows with w (rho >= 0.8), largest w's seeds above the smallest w's",
+        WITHIN_SPREAD: "medians grow (rho >= 0.8), end seed ranges overlap",
+    }.get(status, "no monotone growth (needs rho >= 0.8 and the largest w above the smallest)")
     if status == FAILS:  # a weight whose rollouts stand keeps its feet flat: name it
         walking = {w: data.walk_fraction(w, evaluate.foot_steering) for w in values}
-        standing = [f"w={weight_label(w)} ({f:.0%} of seeds walk)"
-                    for w, f in walking.items() if f is not None and f < 1.0]  # fmt: skip
+        standing = [
+            f"w={weight_label(w)} ({f:.0%} of seeds walk)"
+            for w, f in walking.items()
+            if f is not None and f < 1.0
+        ]
         if standing:
             reason += "; not every seed walks at " + ", ".join(standing)
         reason += configuration_held_cause(pi_gradient)
     return dataclasses.replace(
-        claim, status=status, reason=reason,
-        ours="rad: " + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items())
+        claim,
+        status=status,
+        reason=reason,
+        ours="rad: "
+        + ", ".join(f"w={weight_label(w)}: {span(v)}" for w, v in values.items())
         + f"; Spearman rho of the medians {rho:.2f}",
-    )  # fmt: skip
+    )
 
 
 DRIFT_METRIC = "max |lateral| / |yaw| drift of the base (poses)"
@@ -572,21 +649,23 @@ def _steering_removes(data: SeedData, evaluate: EvaluateParams, axis: str) -> Cl
         "C10" if axis == "y" else "C11",
         f"Steering removes the {'lateral (y)' if axis == 'y' else 'yaw'} drift of the PI model",
         "Sec. IV-A, IV-C1, Figs. base_displacement_pid_ablation, ground_projection",
-        "base_displacement", metric=DRIFT_METRIC,
-    )  # fmt: skip
+        "base_displacement",
+        metric=DRIFT_METRIC,
+    )
     free, steered = data.values(model, False, metric), data.values(model, True, metric)
     if not len(free) or not len(steered):
         return missing(claim, f"w={weight_label(pi_weight)} with and without steering")
     status = order(steered, evaluate.drift_reduction * free)
     unit = "m" if axis == "y" else "rad"
     claim = dataclasses.replace(
-        claim, status=status,
+        claim,
+        status=status,
         ours=f"w={weight_label(pi_weight)} max |{axis}| ({unit}): {span(free)} "
         f"without, {span(steered)} with steering",
         reason=f"steered {'seeds' if status == HOLDS else 'median'} "
         f"{'above' if status == FAILS else 'below'} {evaluate.drift_reduction:g} x the unsteered "
         + ("seeds" if status == HOLDS else "median"),
-    )  # fmt: skip
+    )
     return stands_still(data, claim, [(model, True)])
 
 
@@ -594,32 +673,39 @@ def _drift_pairs(data: SeedData, evaluate: EvaluateParams, steering: bool):
     pi_weight = evaluate.pi_weight
     model = data.model(pi_weight)
     return {
-        axis: (data.values(data.baseline, False, f"drift_{axis}_max_abs"),
-               data.values(model, steering, f"drift_{axis}_max_abs"))
+        axis: (
+            data.values(data.baseline, False, f"drift_{axis}_max_abs"),
+            data.values(model, steering, f"drift_{axis}_max_abs"),
+        )
         for axis in ("y", "yaw")
-    }  # fmt: skip
+    }
 
 
 def _drift_claim(claim: Claim, pairs, label: str, orders: dict[str, str], word: str) -> Claim:
     status = combine(orders.values())
     weak = [a for a, s in orders.items() if s == status]
     return dataclasses.replace(
-        claim, status=status,
-        ours="; ".join(f"max |{a}|: baseline {span(b)}, {label} {span(p)}"
-                       for a, (b, p) in pairs.items()),
-        reason=f"y and yaw {word}, seed ranges separate" if status == HOLDS
-        else f"{', '.join(weak)}: " + ("medians only" if status == WITHIN_SPREAD
-                                       else f"not {word}"),
-    )  # fmt: skip
+        claim,
+        status=status,
+        ours="; ".join(
+            f"max |{a}|: baseline {span(b)}, {label} {span(p)}" for a, (b, p) in pairs.items()
+        ),
+        reason=f"y and yaw {word}, seed ranges separate"
+        if status == HOLDS
+        else f"{', '.join(weak)}: "
+        + ("medians only" if status == WITHIN_SPREAD else f"not {word}"),
+    )
 
 
 def _pi_drifts_more(data: SeedData, evaluate: EvaluateParams) -> Claim:
     pi_weight = evaluate.pi_weight
     claim = Claim(
-        "C12", "Without steering the PI model drifts more than the baseline",
-        "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (b)", "base_displacement",
+        "C12",
+        "Without steering the PI model drifts more than the baseline",
+        "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (b)",
+        "base_displacement",
         metric=DRIFT_METRIC,
-    )  # fmt: skip
+    )
     pairs = _drift_pairs(data, evaluate, False)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the PI model")
@@ -633,10 +719,12 @@ def _pi_drifts_more(data: SeedData, evaluate: EvaluateParams) -> Claim:
 def _steered_beats_baseline(data: SeedData, evaluate: EvaluateParams) -> Claim:
     pi_weight = evaluate.pi_weight
     claim = Claim(
-        "C13", "With steering the PI model deviates less from the walking direction than the "
-        "baseline", "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (c)",
-        "base_displacement", metric=DRIFT_METRIC,
-    )  # fmt: skip
+        "C13",
+        "With steering the PI model deviates less from the walking direction than the baseline",
+        "Sec. IV-A, Fig. base_displacement_pid_ablation (a) vs (c)",
+        "base_displacement",
+        metric=DRIFT_METRIC,
+    )
     pairs = _drift_pairs(data, evaluate, True)
     if any(not len(v) for pair in pairs.values() for v in pair):
         return missing(claim, "the baseline or the steered PI model")
@@ -649,11 +737,13 @@ def _steered_beats_baseline(data: SeedData, evaluate: EvaluateParams) -> Claim:
 def _pi_reduces_foot_motion(data: SeedData, evaluate: EvaluateParams) -> Claim:
     low, high = sorted(evaluate.foot_height_weights)[:1] + sorted(evaluate.foot_height_weights)[-1:]
     claim = Claim(
-        "C14", f"The PI loss (w={weight_label(high)}) reduces support-foot motion against "
+        "C14",
+        f"The PI loss (w={weight_label(high)}) reduces support-foot motion against "
         f"w={weight_label(low)}",
-        "Sec. IV-C2, Fig. pi_ablation_foot_z_plot", "foot_heights",
+        "Sec. IV-C2, Fig. pi_ablation_foot_z_plot",
+        "foot_heights",
         metric="position-level contact-foot speed (m/s); skating ratio beside",
-    )  # fmt: skip
+    )
     steering = evaluate.foot_steering
     models = [data.model(w) for w in (low, high)]
     speed = [data.values(m, steering, "contact_foot_speed_mean_position") for m in models]
@@ -662,11 +752,13 @@ def _pi_reduces_foot_motion(data: SeedData, evaluate: EvaluateParams) -> Claim:
         return missing(claim, f"w={weight_label(low)} and w={weight_label(high)}")
     status = order(speed[1], speed[0])
     claim = dataclasses.replace(
-        claim, status=status,
+        claim,
+        status=status,
         ours=f"w={weight_label(low)}: {span(speed[0])}, w={weight_label(high)}: "
         f"{span(speed[1])}; skating ratio {fmt(skate[0])}, {fmt(skate[1])}",
-        reason={HOLDS: "contact feet move slower in every seed",
-                WITHIN_SPREAD: "median slower, seed ranges overlap"}.get(
-            status, "contact feet do not move slower"),
-    )  # fmt: skip
+        reason={
+            HOLDS: "contact feet move slower in every seed",
+            WITHIN_SPREAD: "median slower, seed ranges overlap",
+        }.get(status, "contact feet do not move slower"),
+    )
     return stands_still(data, claim, [(models[1], steering)])

@@ -65,9 +65,11 @@ def script_displacement(script: Sequence[cf.Segment], rate_hz: float) -> np.ndar
     steps = scenario_steps(script, rate_hz)
     dt = 1.0 / rate_hz
     commands = np.array(
-        [[0.0, 0.0, 0.0] if isinstance(s, StandSegment) else [s.vx, s.vy, s.yaw_rate]
-         for s in script]
-    )[steps]  # fmt: skip
+        [
+            [0.0, 0.0, 0.0] if isinstance(s, StandSegment) else [s.vx, s.vy, s.yaw_rate]
+            for s in script
+        ]
+    )[steps]
     yaw = np.concatenate([[0.0], np.cumsum(commands[:, 2] * dt)])
     mid = (yaw[:-1] + yaw[1:]) / 2
     world = from_heading_frame(commands[:, :2], mid)
@@ -135,10 +137,16 @@ def collect_following(
         results = pool_map(_data_job, jobs, workers, "data following")
         for clip, measures in zip(clips, results, strict=True):
             keys = {
-                "model": DATA_MODEL, "variant": DATA_MODEL, "pi_weight": math.nan, "seed": 0,
-                "scenario": clip.scenario, "steering": False, "kind": "clip",
-                "split": clip.split, "rollout": f"{Path(data).name}:{clip.name}",
-            }  # fmt: skip
+                "model": DATA_MODEL,
+                "variant": DATA_MODEL,
+                "pi_weight": math.nan,
+                "seed": 0,
+                "scenario": clip.scenario,
+                "steering": False,
+                "kind": "clip",
+                "split": clip.split,
+                "rollout": f"{Path(data).name}:{clip.name}",
+            }
             rows += [{**keys, **row} for row in measures]
     frame = pd.DataFrame(rows)
     order = frame["model"].map(lambda m: 0 if m == DATA_MODEL else 1 if m == BASELINE else 2)
@@ -196,12 +204,26 @@ def summary_table(summary: pd.DataFrame) -> list[str]:
     data = {_level_key(r): r for _, r in summary[summary["model"] == DATA_MODEL].iterrows()}
     split = ["split"] if "split" in summary else []
     header = [
-        "model", *split, "steering", "class", "seeds", "segments", "cmd speed", "speed ratio",
-        "heading err (°)", "alternation", "sliding lin: velocity / position level (data)",
+        "model",
+        *split,
+        "steering",
+        "class",
+        "seeds",
+        "segments",
+        "cmd speed",
+        "speed ratio",
+        "heading err (°)",
+        "alternation",
+        "sliding lin: velocity / position level (data)",
         "stand travel ratio",
-        "roll / pitch / foot pitch drift (°)", "speed", "heading", "stand", "alternation",
-        "drift", "passes",
-    ]  # fmt: skip
+        "roll / pitch / foot pitch drift (°)",
+        "speed",
+        "heading",
+        "stand",
+        "alternation",
+        "drift",
+        "passes",
+    ]
     lines = []
     for _, row in summary.iterrows():
         in_place = row["class"] == "turning_in_place"
@@ -210,17 +232,24 @@ def summary_table(summary: pd.DataFrame) -> list[str]:
             _number(row[c], 1)
             for c in ("roll_drift_deg", "pitch_drift_deg", "foot_pitch_drift_deg")
         )
-        lines.append([
-            _model_label(row), *(str(row[c]) for c in split),
-            STEERING_LABEL[bool(row["steering"])], row["class"],
-            str(int(row["seeds"])), str(int(row["segments"])),
-            _number(row["commanded_speed"]),
-            _number(ratio) + (" (yaw rate)" if in_place else ""),
-            _number(row["heading_error_deg"], 1), _number(row["alternation_share"]),
-            _sliding(row, data),
-            _number(row["base_travel_ratio"]), drifts,
-            *(_mark(row[c]) for c in (*cf.CRITERIA, "passes")),
-        ])  # fmt: skip
+        lines.append(
+            [
+                _model_label(row),
+                *(str(row[c]) for c in split),
+                STEERING_LABEL[bool(row["steering"])],
+                row["class"],
+                str(int(row["seeds"])),
+                str(int(row["segments"])),
+                _number(row["commanded_speed"]),
+                _number(ratio) + (" (yaw rate)" if in_place else ""),
+                _number(row["heading_error_deg"], 1),
+                _number(row["alternation_share"]),
+                _sliding(row, data),
+                _number(row["base_travel_ratio"]),
+                drifts,
+                *(_mark(row[c]) for c in (*cf.CRITERIA, "passes")),
+            ]
+        )
     return _table(header, lines)
 
 
@@ -237,14 +266,17 @@ def scenario_summary(rows: pd.DataFrame) -> pd.DataFrame:
         named.assign(_held=held.where(named["stand"]))
         .groupby(keys, sort=False, dropna=False)
         .agg(
-            dx=("rollout_dx_m", "first"), dy=("rollout_dy_m", "first"),
-            cmd_dx=("script_dx_m", "first"), cmd_dy=("script_dy_m", "first"),
+            dx=("rollout_dx_m", "first"),
+            dy=("rollout_dy_m", "first"),
+            cmd_dx=("script_dx_m", "first"),
+            cmd_dy=("script_dy_m", "first"),
             speed_ratio=("speed_ratio", "mean"),
             touchdowns_left=("touchdowns_left", "sum"),
             touchdowns_right=("touchdowns_right", "sum"),
-            stands=("stand", "sum"), stands_held=("_held", "sum"),
+            stands=("stand", "sum"),
+            stands_held=("_held", "sum"),
         )
-    )  # fmt: skip
+    )
     per_seed["stand_held"] = (per_seed["stands_held"] == per_seed["stands"]).where(
         per_seed["stands"] > 0
     )
@@ -258,19 +290,32 @@ def scenario_summary(rows: pd.DataFrame) -> pd.DataFrame:
 
 def scenario_table(table: pd.DataFrame) -> list[str]:
     header = [
-        "model", "steering", "scenario", "seeds", "displacement fwd / left (m)",
-        "commanded (m)", "speed ratio", "touchdowns L / R", "stand held",
-    ]  # fmt: skip
+        "model",
+        "steering",
+        "scenario",
+        "seeds",
+        "displacement fwd / left (m)",
+        "commanded (m)",
+        "speed ratio",
+        "touchdowns L / R",
+        "stand held",
+    ]
     lines = []
     for _, row in table.iterrows():
         held = row["stand_held"]
-        lines.append([
-            _model_label(row), STEERING_LABEL[bool(row["steering"])], row["scenario"],
-            str(int(row["seeds"])), f"{_number(row['dx'])} / {_number(row['dy'])}",
-            f"{_number(row['cmd_dx'])} / {_number(row['cmd_dy'])}", _number(row["speed_ratio"]),
-            f"{_number(row['touchdowns_left'], 0)} / {_number(row['touchdowns_right'], 0)}",
-            "–" if pd.isna(held) else f"{held:.0%} of seeds",
-        ])  # fmt: skip
+        lines.append(
+            [
+                _model_label(row),
+                STEERING_LABEL[bool(row["steering"])],
+                row["scenario"],
+                str(int(row["seeds"])),
+                f"{_number(row['dx'])} / {_number(row['dy'])}",
+                f"{_number(row['cmd_dx'])} / {_number(row['cmd_dy'])}",
+                _number(row["speed_ratio"]),
+                f"{_number(row['touchdowns_left'], 0)} / {_number(row['touchdowns_right'], 0)}",
+                "–" if pd.isna(held) else f"{held:.0%} of seeds",
+            ]
+        )
     return _table(header, lines)
 
 

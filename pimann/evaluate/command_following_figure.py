@@ -79,12 +79,26 @@ def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figu
             rows = [part.loc[(model, c)] if (model, c) in part.index else None for c in classes]
             achieved = [np.nan if r is None else r["achieved_speed"] for r in rows]
             commanded = np.array([np.nan if r is None else r["commanded_speed"] for r in rows])
-            ax.bar(offsets, 2 * SPEED_TOLERANCE * commanded, bottom=(1 - SPEED_TOLERANCE) *
-                   commanded, width=width, color=BAND_COLOUR, lw=0, zorder=0)  # fmt: skip
+            ax.bar(
+                offsets,
+                2 * SPEED_TOLERANCE * commanded,
+                bottom=(1 - SPEED_TOLERANCE) * commanded,
+                width=width,
+                color=BAND_COLOUR,
+                lw=0,
+                zorder=0,
+            )
             ax.bar(offsets, achieved, width=width * 0.8, color=colour, label=label, zorder=2)
-            ax.plot(offsets, commanded, ls="none", marker="_", color="black", zorder=3,
-                    markersize=max(3.0, 72 * width * figures.width_in / len(classes) * 0.8),
-                    markeredgewidth=1.0)  # fmt: skip
+            ax.plot(
+                offsets,
+                commanded,
+                ls="none",
+                marker="_",
+                color="black",
+                zorder=3,
+                markersize=max(3.0, 72 * width * figures.width_in / len(classes) * 0.8),
+                markeredgewidth=1.0,
+            )
         ax.axhline(0.0, color="0.3", lw=0.5)
         ax.set_title(STEERING_TITLES[bool(steering)], pad=2)
         ax.set_ylabel("speed (m/s)")
@@ -94,6 +108,11 @@ def fig_command_following(summary: pd.DataFrame, figures: FiguresParams) -> Figu
         Line2D([], [], color="black", marker="_", ls="none", markersize=6, label="commanded"),
         Patch(color=BAND_COLOUR, label=f"\u00b1{SPEED_TOLERANCE:.0%}"),
     ]
-    fig.legend(handles=handles, loc="outside upper center", ncols=min(4, len(handles)),
-               columnspacing=1.0, handlelength=1.2)  # fmt: skip
+    fig.legend(
+        handles=handles,
+        loc="outside upper center",
+        ncols=min(4, len(handles)),
+        columnspacing=1.0,
+        handlelength=1.2,
+    )
     return fig

@@ -83,9 +83,12 @@ RULES = ("evaluate_rule", "file_contacts")
 # the evaluate section's keys the foot metrics read (dvc.yaml lists these for the stage, so
 # what the claims and figures feature never reruns the data report)
 METRIC_KEYS = (
-    "skating_height", "skating_speed_per_frame", "skating_rate_hz", "walk_distance",
+    "skating_height",
+    "skating_speed_per_frame",
+    "skating_rate_hz",
+    "walk_distance",
     "foot_velocity_frame",
-)  # fmt: skip
+)
 ALL = "all"  # the source of clips without a `dataset` attribute
 TOTAL = "total"
 CORNER_COLUMNS = tuple(f"glide_{f}{c}" for f in "lr" for c in range(len(SOLE_CORNERS)))
@@ -352,7 +355,7 @@ def build_report(frames: pd.DataFrame, params: Params, collection: str | Path) -
                 "window": params.features.window,
                 "contact_margin_s": params.features.contact_margin_s,
             },
-        },  # fmt: skip
+        },
         "thresholds": thresholds(),
         "authors": {
             "minutes": AUTHORS_MINUTES,

@@ -133,8 +133,11 @@ def report_table(report: dict[str, Any]) -> str:
     ]
     for name, s in sources.items():
         f = s["floor"]
-        cells = [_cell(f["lowest_corner_m"], 3), _cell(f["below_floor_share"], 4),
-                 _cell(f["flight_share"], 4)]  # fmt: skip
+        cells = [
+            _cell(f["lowest_corner_m"], 3),
+            _cell(f["below_floor_share"], 4),
+            _cell(f["flight_share"], 4),
+        ]
         lines.append(f"| {name} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 

@@ -162,9 +162,12 @@ def _plain(value: Any) -> Any:
 
 
 def representative_seed(
-    frame: pd.DataFrame, model: str, scenario: str, steering: bool,
+    frame: pd.DataFrame,
+    model: str,
+    scenario: str,
+    steering: bool,
     metric: str = "support_rmse_paper_linear_total",
-) -> int | None:  # fmt: skip
+) -> int | None:
     """The seed whose `metric` is closest to the seeds' median (ties: the lowest seed)."""
     rows = select_rows(frame, scenario, steering, model=model).dropna(subset=[metric])
     if rows.empty:

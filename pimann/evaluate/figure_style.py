@@ -86,11 +86,19 @@ def save_figure(
     )
     profile = f"profile={provenance.get('profile')}"
     metadata = {
-        "pdf": {"Title": name, "Subject": f"pimann {summary}", "Keywords": profile,
-                "Creator": "pimann.report.figures", "CreationDate": None},
-        "png": {"Title": name, "Description": f"pimann {summary}", "Software":
-        "pimann.report.figures"},
-    }  # fmt: skip
+        "pdf": {
+            "Title": name,
+            "Subject": f"pimann {summary}",
+            "Keywords": profile,
+            "Creator": "pimann.report.figures",
+            "CreationDate": None,
+        },
+        "png": {
+            "Title": name,
+            "Description": f"pimann {summary}",
+            "Software": "pimann.report.figures",
+        },
+    }
     paths = []
     for fmt in formats:
         target = Path(out_dir) / f"{name}.{fmt}"

@@ -211,9 +211,18 @@ def analyse(
     authors_contacts[1:] = contacts_from_heights(feet.positions[1:, :, 2], dt, rule, initial=True)
     displacement, angles = base_drift(trajectory)
     return Analysis(
-        time, feet, levels, params.foot_velocity_frame, contacts, origin_contacts,
-        authors_contacts, contacts_source, joint_source, displacement, angles,
-    )  # fmt: skip
+        time,
+        feet,
+        levels,
+        params.foot_velocity_frame,
+        contacts,
+        origin_contacts,
+        authors_contacts,
+        contacts_source,
+        joint_source,
+        displacement,
+        angles,
+    )
 
 
 def sliding_frames(

@@ -165,8 +165,9 @@ class AdherentGenerator:
         self.past_angle = np.repeat(angle[:, None], self.length, axis=1)
         self.past_velocity_world = np.zeros((rows, self.length, 2))
         self.twist_velocity = np.zeros((rows, 2))  # the last output's planar velocity, world
-        still = command_future(np.zeros((rows, 2)), np.zeros(rows), layout.future_offsets,
-                               layout.rate_hz)  # fmt: skip
+        still = command_future(
+            np.zeros((rows, 2)), np.zeros(rows), layout.future_offsets, layout.rate_hz
+        )
         self.x = self._input(still)  # BLF reset's input: standing still
         self.y: np.ndarray | None = None
         self.stopped = np.ones(rows, dtype=bool)  # BLF reset: isRobotStopped
@@ -216,17 +217,22 @@ class AdherentGenerator:
         self.joints = y[:, self.ys["joints"]].copy()  # already the state's (advance)
         self.joint_velocities = y[:, self.ys["joint_velocities"]].copy()
         pushed = self.twist_velocity if self.past_velocity == "twist" else 0.0
-        for name, value in (("past_position", self.position[:, :2]),
-                            ("past_angle", self._facing_angle()),
-                            ("past_velocity_world", pushed)):  # fmt: skip
+        for name, value in (
+            ("past_position", self.position[:, :2]),
+            ("past_angle", self._facing_angle()),
+            ("past_velocity_world", pushed),
+        ):
             history = getattr(self, name)
             history[:, :-1] = history[:, 1:]
             history[:, -1] = value
         n, f = len(self.rows), self.n_future
         predicted = np.stack(
-            [y[:, self.ys[f"{b}_future"]].reshape(n, f, 2)
-             for b in ("base_positions", "facing_directions", "base_velocities")], 1,
-        )  # fmt: skip
+            [
+                y[:, self.ys[f"{b}_future"]].reshape(n, f, 2)
+                for b in ("base_positions", "facing_directions", "base_velocities")
+            ],
+            1,
+        )
         future = (1.0 - self.blend) * predicted + self.blend * desired
         x = self._input(future)
         self.stopped = np.ones(n, dtype=bool)
@@ -295,36 +301,48 @@ def generate_adherent(
         return []
     rate = float(layout.rate_hz)
     plan = ScriptSteps([run.script for run in runs], rate)
-    generator = AdherentGenerator(network, layout, robot, contact_params, standing, len(runs),
-                                  past_velocity)  # fmt: skip
+    generator = AdherentGenerator(
+        network, layout, robot, contact_params, standing, len(runs), past_velocity
+    )
     n = len(plan.active)
-    record = {name: np.empty((n, *np.shape(value))) for name, value in (
-        ("position", generator.position), ("rotation", generator.rotation),
-        ("joints", generator.joints), ("joint_velocities", generator.joint_velocities),
-        ("contacts", generator.contacts))}  # fmt: skip
+    record = {
+        name: np.empty((n, *np.shape(value)))
+        for name, value in (
+            ("position", generator.position),
+            ("rotation", generator.rotation),
+            ("joints", generator.joints),
+            ("joint_velocities", generator.joint_velocities),
+            ("contacts", generator.contacts),
+        )
+    }
     for k in range(n):
         if k > 0:
-            desired = command_future(plan.velocity[k], plan.yaw_rate[k], layout.future_offsets,
-                                     rate)  # fmt: skip
+            desired = command_future(
+                plan.velocity[k], plan.yaw_rate[k], layout.future_offsets, rate
+            )
             generator.step(desired)
         for name in ("position", "joints", "joint_velocities", "contacts"):
             record[name][k] = getattr(generator, name)
         record["rotation"][k] = generator.rotation
     out = []
     for row, run in enumerate(runs):
-        kept = {name: np.ascontiguousarray(v[: plan.lengths[row] + 1, row])
-                for name, v in record.items()}  # fmt: skip
-        out.append(Trajectory(
-            time=np.arange(len(kept["position"])) / rate,
-            base_position=kept["position"],
-            base_quaternion_xyzw=Rotation.from_matrix(kept["rotation"]).as_quat(),
-            joint_positions=kept["joints"],
-            source=run.source,
-            rate_hz=rate,
-            contacts=kept["contacts"].astype(bool),
-            joint_velocities=kept["joint_velocities"],
-            attrs={"steering": False, **run.attrs},
-        ))  # fmt: skip
+        kept = {
+            name: np.ascontiguousarray(v[: plan.lengths[row] + 1, row])
+            for name, v in record.items()
+        }
+        out.append(
+            Trajectory(
+                time=np.arange(len(kept["position"])) / rate,
+                base_position=kept["position"],
+                base_quaternion_xyzw=Rotation.from_matrix(kept["rotation"]).as_quat(),
+                joint_positions=kept["joints"],
+                source=run.source,
+                rate_hz=rate,
+                contacts=kept["contacts"].astype(bool),
+                joint_velocities=kept["joint_velocities"],
+                attrs={"steering": False, **run.attrs},
+            )
+        )
     return out
 
 
@@ -344,13 +362,21 @@ def _seed_files(job: tuple[Path, dict[str, tuple[list[Segment], Path]], Params])
         model, layout, stats, meta = load_adherent_model(model_dir)
         standing = StandingPose.from_json(meta.get("standing"))
         runs = [
-            AdherentRun(script, f"{repo_relative(model_dir)}:{scenario}", {
-                "scenario": scenario, "model_dir": repo_relative(model_dir),
-                SCRIPT_ATTR: script_json(script), "pi_weight": 0.0, "seed": int(meta["seed"]),
-                "variant": layout.variant, "start_pose": standing.origin,
-            })
+            AdherentRun(
+                script,
+                f"{repo_relative(model_dir)}:{scenario}",
+                {
+                    "scenario": scenario,
+                    "model_dir": repo_relative(model_dir),
+                    SCRIPT_ATTR: script_json(script),
+                    "pi_weight": 0.0,
+                    "seed": int(meta["seed"]),
+                    "variant": layout.variant,
+                    "start_pose": standing.origin,
+                },
+            )
             for scenario, (script, _) in files.items()
-        ]  # fmt: skip
+        ]
         trajectories = generate_adherent(
             AdherentNetwork(model, stats), layout, runs, load_robot(), params.contacts, standing
         )
@@ -369,8 +395,10 @@ def run_adherent_rollouts(
     scripts = adherent_runs(params)
 
     def seed_job(tmp: Path, seed: int, folder: Path) -> tuple:
-        files = {sc: (script, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, False)))
-                 for sc, script in scripts.items()}  # fmt: skip
+        files = {
+            sc: (script, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, False)))
+            for sc, script in scripts.items()
+        }
         return folder, files, params
 
     return write_seed_rollouts(models_dir, out_dir, params, seed_job, _seed_files, workers)

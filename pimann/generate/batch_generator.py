@@ -74,19 +74,31 @@ def data_start(
         fed_position, fed_rpy = layout.pose(
             trajectory.base_position[k - 1], matrix_to_rpy(rotations[: k + 1])[k - 1]
         )
-        rows.append((
-            np.stack([linear[frames], angular[frames]], axis=1),  # (L, 2, 3), world frame
-            np.stack([linear[ahead], angular[ahead]]) @ rotations[k],  # R_k^T v, (2, F, 3)
-            trajectory.joint_positions[k - 1], joint_velocities[k - 1], fed_position, fed_rpy,
-            trajectory.base_position[k - 1], rotations[k - 1], rotations[k],
-        ))  # fmt: skip
+        rows.append(
+            (
+                np.stack([linear[frames], angular[frames]], axis=1),  # (L, 2, 3), world frame
+                np.stack([linear[ahead], angular[ahead]]) @ rotations[k],  # R_k^T v, (2, F, 3)
+                trajectory.joint_positions[k - 1],
+                joint_velocities[k - 1],
+                fed_position,
+                fed_rpy,
+                trajectory.base_position[k - 1],
+                rotations[k - 1],
+                rotations[k],
+            )
+        )
     history, future, joints, velocities, fed_position, fed_rpy, position, rotation, ahead = (
         np.stack(part) for part in zip(*rows, strict=True)
     )
     generator.start_in_gait(
-        history, future, (joints, velocities, fed_position, fed_rpy), position, rotation, ahead,
+        history,
+        future,
+        (joints, velocities, fed_position, fed_rpy),
+        position,
+        rotation,
+        ahead,
         phase=np.stack(phases) if phases else None,
-    )  # fmt: skip
+    )
 
 
 class BatchGenerator:
@@ -193,8 +205,9 @@ class BatchGenerator:
         """
         rows, length = len(self.head), history.shape[1]
         if length < self.history_length:
-            raise PimannError(None, f"a history of {length} frames; the window needs "
-                              f"{self.history_length}")  # fmt: skip
+            raise PimannError(
+                None, f"a history of {length} frames; the window needs {self.history_length}"
+            )
         self.history = np.ascontiguousarray(history[:, -self.history_length :], dtype=float)
         self.head = np.full(rows, self.history_length - 1)
         self.future = np.array(future, dtype=float)
@@ -348,9 +361,16 @@ class BatchGenerator:
         if steered.any():
             p = self.params
             linear_c, angular_c = steer(
-                linear, angular, self.position[rows, None], base[:, None], self.goal[rows, None],
-                self.desired(rows)[:, None], p.k0, p.k1, planar=p.planar_steering,
-            )  # fmt: skip
+                linear,
+                angular,
+                self.position[rows, None],
+                base[:, None],
+                self.goal[rows, None],
+                self.desired(rows)[:, None],
+                p.k0,
+                p.k1,
+                planar=p.planar_steering,
+            )
             if not steered.all():
                 linear_c = np.where(steered[:, None, None], linear_c, linear)
                 angular_c = np.where(steered[:, None, None], angular_c, angular)

@@ -84,8 +84,9 @@ def training_clips(collection: str | Path, params: Params) -> list[tuple[str, Tr
             durations[name] = _duration(t)
     classes = {n: c for n, c in classes.items() if durations[n] <= longest + 1e-9}
     names = sorted(classes)
-    order = [names[k] for k in np.random.default_rng(params.features.split_seed).permutation(
-        len(names))]  # fmt: skip
+    order = [
+        names[k] for k in np.random.default_rng(params.features.split_seed).permutation(len(names))
+    ]
     chosen: list[str] = []
     for name in CLASSES:
         chosen += spread_pick([n for n in order if classes[n] == name], groups, count)
@@ -103,10 +104,14 @@ class BenchmarkClip(NamedTuple):
 def benchmark_clips(collection: str | Path, params: Params) -> list[BenchmarkClip]:
     """The benchmark's clips: every test clip (HELD_OUT, clip_<name>), then the training clips
     of `training_clips` (TRAINING, train_<name>)."""
-    clips = [BenchmarkClip(HELD_OUT, n, clip_scenario(n), t)
-             for n, t in held_out_clips(collection, params)]  # fmt: skip
-    clips += [BenchmarkClip(TRAINING, n, train_scenario(n), t)
-              for n, t in training_clips(collection, params)]  # fmt: skip
+    clips = [
+        BenchmarkClip(HELD_OUT, n, clip_scenario(n), t)
+        for n, t in held_out_clips(collection, params)
+    ]
+    clips += [
+        BenchmarkClip(TRAINING, n, train_scenario(n), t)
+        for n, t in training_clips(collection, params)
+    ]
     seen: set[str] = set()
     for clip in clips:
         if clip.scenario in seen:

@@ -144,26 +144,50 @@ def generate_batch(
         return []
     plan = ScriptSteps([spec.script for spec in specs], float(layout.rate_hz))
     generator = BatchGenerator(
-        model, layout, stats, params, np.array([spec.steering for spec in specs]),
-        robot or load_robot(), contact_params,
+        model,
+        layout,
+        stats,
+        params,
+        np.array([spec.steering for spec in specs]),
+        robot or load_robot(),
+        contact_params,
         standing or StandingPose.nominal(),
-    )  # fmt: skip
+    )
     if start_joint_velocities is not None:
         generator.joint_velocities[:] = start_joint_velocities
-    names = ("position", "rotation", "joints", "joint_velocities", "contacts", "goal", "stopped",
-             "foot", "base_velocity")  # fmt: skip
+    names = (
+        "position",
+        "rotation",
+        "joints",
+        "joint_velocities",
+        "contacts",
+        "goal",
+        "stopped",
+        "foot",
+        "base_velocity",
+    )
     n = len(plan.active)
-    out = {name: np.empty((n, *np.shape(getattr(generator, name))),
-                          dtype=np.asarray(getattr(generator, name)).dtype)
-           for name in names}  # fmt: skip
+    out = {
+        name: np.empty(
+            (n, *np.shape(getattr(generator, name))),
+            dtype=np.asarray(getattr(generator, name)).dtype,
+        )
+        for name in names
+    }
     recording = 0.0
     # numpy's BLAS on one thread: a product of one sample is too small to share, and on a
     # loaded machine each wake-up of a second thread waits for a core (3 s a rollout, not 0.1)
     with torch.inference_mode(), _blas().limit(limits=1, user_api="blas"):
         for k in range(n):
             if k > 0:
-                generator.step(k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k],
-                               plan.changed[k], plan.active[k])  # fmt: skip
+                generator.step(
+                    k,
+                    plan.velocity[k],
+                    plan.yaw_rate[k],
+                    plan.stand[k],
+                    plan.changed[k],
+                    plan.active[k],
+                )
             clock = time.perf_counter()
             for name in names:
                 out[name][k] = getattr(generator, name)
@@ -174,8 +198,10 @@ def generate_batch(
 
     rollouts = []
     for row, spec in enumerate(specs):
-        kept = {name: np.ascontiguousarray(values[: plan.lengths[row] + 1, row])
-                for name, values in out.items()}  # fmt: skip
+        kept = {
+            name: np.ascontiguousarray(values[: plan.lengths[row] + 1, row])
+            for name, values in out.items()
+        }
         trajectory = Trajectory(
             time=np.arange(len(kept["position"])) * generator.dt,
             base_position=kept["position"],
@@ -220,9 +246,15 @@ def generate_rollout(
     """
     spec = RolloutSpec(list(scenario), bool(steering), source, attrs)
     return generate_batch(
-        model, layout, stats, [spec], params, robot,
-        contact_params=contact_params, standing=standing,
-    )[0]  # fmt: skip
+        model,
+        layout,
+        stats,
+        [spec],
+        params,
+        robot,
+        contact_params=contact_params,
+        standing=standing,
+    )[0]
 
 
 def generate(
@@ -307,18 +339,30 @@ def _model_rollouts(
             chunk = ordered[first : first + batch_size]
             specs = [
                 RolloutSpec(
-                    list(job.script), job.steering, f"{repo_relative(model_dir)}:{job.scenario}",
-                    {"scenario": job.scenario, "model_dir": repo_relative(model_dir),
-                     SCRIPT_ATTR: script_json(job.script), **model_attrs,
-                     "start_pose": standing.origin,
-                     **({"protocol": job.protocol} if job.protocol else {})},
+                    list(job.script),
+                    job.steering,
+                    f"{repo_relative(model_dir)}:{job.scenario}",
+                    {
+                        "scenario": job.scenario,
+                        "model_dir": repo_relative(model_dir),
+                        SCRIPT_ATTR: script_json(job.script),
+                        **model_attrs,
+                        "start_pose": standing.origin,
+                        **({"protocol": job.protocol} if job.protocol else {}),
+                    },
                 )
                 for job in chunk
-            ]  # fmt: skip
+            ]
             rollouts = generate_batch(
-                model, layout, stats, specs, rollout, robot,
-                contact_params=params.contacts, standing=standing,
-            )  # fmt: skip
+                model,
+                layout,
+                stats,
+                specs,
+                rollout,
+                robot,
+                contact_params=params.contacts,
+                standing=standing,
+            )
             yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 
 

@@ -29,15 +29,21 @@ class NumpyMANN:
     def __init__(self, model: MANN):
         if model.ensemble != 1:
             raise ValueError(f"one member, not an ensemble of {model.ensemble}")
-        member = {name: value[0].detach().cpu().numpy().copy()
-                  for name, value in model.state_dict().items()}  # fmt: skip
+        member = {
+            name: value[0].detach().cpu().numpy().copy()
+            for name, value in model.state_dict().items()
+        }
         self.n_experts = model.n_experts
         # (weight (in, out), its transpose (out, in), bias) per layer; the gate's are stored
         # (out, in) as nn.Linear's, the experts' blocks (in, K out)
-        self.gate = [self._layer(member[f"gate_weight_{i}"].T, member[f"gate_bias_{i}"])
-                     for i in range(model.n_gate_layers)]  # fmt: skip
-        self.experts = [self._layer(member[f"expert_weight_{i}"], member[f"expert_bias_{i}"])
-                        for i in range(model.n_expert_layers)]  # fmt: skip
+        self.gate = [
+            self._layer(member[f"gate_weight_{i}"].T, member[f"gate_bias_{i}"])
+            for i in range(model.n_gate_layers)
+        ]
+        self.experts = [
+            self._layer(member[f"expert_weight_{i}"], member[f"expert_bias_{i}"])
+            for i in range(model.n_expert_layers)
+        ]
 
     @staticmethod
     def _layer(weight: np.ndarray, bias: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

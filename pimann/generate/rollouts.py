@@ -113,8 +113,11 @@ def run_rollouts(
     ]  # a protocol runs under its own name, with the rollout keys it sets
 
     def seed_job(tmp: Path, seed: int, folder: Path) -> tuple:
-        files = [(sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)),
-                  protocol) for sc, script, protocol in runs for st in (False, True)]  # fmt: skip
+        files = [
+            (sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)), protocol)
+            for sc, script, protocol in runs
+            for st in (False, True)
+        ]
         return folder, files, params
 
     return write_seed_rollouts(models_dir, out_dir, params, seed_job, _generate_seed, workers)

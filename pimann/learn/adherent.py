@@ -93,14 +93,25 @@ class AdherentLayout:
     @property
     def x_slices(self) -> dict[str, slice]:
         n = 2 * len(self.offsets)
-        return self._slices([*((b, n) for b in BASE_BLOCKS), ("joints", self.n_joints),
-                             ("joint_velocities", self.n_joints)])  # fmt: skip
+        return self._slices(
+            [
+                *((b, n) for b in BASE_BLOCKS),
+                ("joints", self.n_joints),
+                ("joint_velocities", self.n_joints),
+            ]
+        )
 
     @property
     def y_slices(self) -> dict[str, slice]:
         n = 2 * len(self.future_offsets)
-        return self._slices([*((f"{b}_future", n) for b in BASE_BLOCKS), ("joints", self.n_joints),
-                             ("joint_velocities", self.n_joints), ("base_twist", 3)])  # fmt: skip
+        return self._slices(
+            [
+                *((f"{b}_future", n) for b in BASE_BLOCKS),
+                ("joints", self.n_joints),
+                ("joint_velocities", self.n_joints),
+                ("base_twist", 3),
+            ]
+        )
 
     @property
     def input_dim(self) -> int:
@@ -141,10 +152,13 @@ class AdherentLayout:
         except (TypeError, ValueError) as error:
             raise PimannError(None, f"not an ADHERENT layout ({error})") from None
         fine = (
-            all(type(o) is int for o in layout.offsets) and list(layout.offsets) == sorted(
-                set(layout.offsets)) and 0 in layout.offsets and layout.future_offsets
-            and type(layout.rate_hz) in (int, float) and layout.rate_hz > 0
-        )  # fmt: skip
+            all(type(o) is int for o in layout.offsets)
+            and list(layout.offsets) == sorted(set(layout.offsets))
+            and 0 in layout.offsets
+            and layout.future_offsets
+            and type(layout.rate_hz) in (int, float)
+            and layout.rate_hz > 0
+        )
         if not fine:
             raise PimannError(None, f"the ADHERENT layout is malformed: {text}")
         return layout
@@ -235,8 +249,11 @@ def window(frame: FrameFeatures, centres: np.ndarray, offsets: Sequence[int]) ->
     at = centres[:, None] + np.asarray(offsets)[None, :]  # (N, K)
     facing = frame.facing[centres]
     to_local = planar_rotation(np.arctan2(facing[:, 1], facing[:, 0])).transpose(0, 2, 1)
-    parts = (frame.position[at] - frame.position[centres][:, None], frame.facing[at],
-             frame.velocity[at])  # fmt: skip
+    parts = (
+        frame.position[at] - frame.position[centres][:, None],
+        frame.facing[at],
+        frame.velocity[at],
+    )
     return np.stack([np.einsum("nij,nkj->nki", to_local, part) for part in parts], axis=1)
 
 
@@ -265,9 +282,15 @@ def clip_samples(
         axis=1,
     )
     y = np.concatenate(
-        [future.reshape(len(steps), -1), frame.joints[steps], frame.joint_velocities[steps],
-         linear, yaw_rate[:, None]], axis=1,
-    )  # fmt: skip
+        [
+            future.reshape(len(steps), -1),
+            frame.joints[steps],
+            frame.joint_velocities[steps],
+            linear,
+            yaw_rate[:, None],
+        ],
+        axis=1,
+    )
     return x, y, steps
 
 
@@ -297,8 +320,14 @@ def build_adherent_dataset(
         parts[trajectory.source in test_sources].append((x, y, origin, contacts))
 
     def stack(side: bool) -> tuple[np.ndarray, ...]:
-        items = parts[side] or [(np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)),
-                                 np.empty((0, 2)), np.empty((0, 2)))]  # fmt: skip
+        items = parts[side] or [
+            (
+                np.empty((0, layout.input_dim)),
+                np.empty((0, layout.output_dim)),
+                np.empty((0, 2)),
+                np.empty((0, 2)),
+            )
+        ]
         x, y, origin, contacts = (np.concatenate(a) for a in zip(*items, strict=True))
         return x, y, origin.astype(np.int64), contacts.astype(bool) if with_contacts else None
 
@@ -343,9 +372,11 @@ def read_adherent_dataset(path: str | Path) -> FeatureDataset:
                 layout = AdherentLayout.from_json(file.attrs["layout"])
             n_in, n_out = layout.input_dim, layout.output_dim
             stats = Normalisation(
-                _array(file, path, "X_mean", (n_in,)), _array(file, path, "X_std", (n_in,)),
-                _array(file, path, "Y_mean", (n_out,)), _array(file, path, "Y_std", (n_out,)),
-            )  # fmt: skip
+                _array(file, path, "X_mean", (n_in,)),
+                _array(file, path, "X_std", (n_in,)),
+                _array(file, path, "Y_mean", (n_out,)),
+                _array(file, path, "Y_std", (n_out,)),
+            )
             if (stats.x_std <= 0).any() or (stats.y_std <= 0).any():
                 raise PimannError(path, "X_std or Y_std holds values <= 0")
             split = {}
@@ -359,8 +390,15 @@ def read_adherent_dataset(path: str | Path) -> FeatureDataset:
     except (OSError, KeyError) as error:
         raise PimannError(path, f"unreadable feature dataset ({error})") from None
     return FeatureDataset(
-        x_train=split["train"][0], y_train=split["train"][1], x_test=split["test"][0],
-        y_test=split["test"][1], stats=stats, layout=layout,  # type: ignore[arg-type]
-        clips=clips, sources=sources, train_origin=split["train"][2],
-        test_origin=split["test"][2], standing=standing,
-    )  # fmt: skip
+        x_train=split["train"][0],
+        y_train=split["train"][1],
+        x_test=split["test"][0],
+        y_test=split["test"][1],
+        stats=stats,
+        layout=layout,  # type: ignore[arg-type]
+        clips=clips,
+        sources=sources,
+        train_origin=split["train"][2],
+        test_origin=split["test"][2],
+        standing=standing,
+    )

@@ -100,8 +100,14 @@ def train_adherent(
     best = {k: v.detach().clone() for k, v in model.state_dict().items()}
     best_loss, best_epoch = [math.inf] * members, [-1] * members
     history: list[list[dict]] = [[] for _ in seeds]
-    log.info("adherent: seeds %s, %d of %d training samples, %d test, %d epochs",
-             seeds, n, len(data.x_train), len(x_test), config.epochs)  # fmt: skip
+    log.info(
+        "adherent: seeds %s, %d of %d training samples, %d test, %d epochs",
+        seeds,
+        n,
+        len(data.x_train),
+        len(x_test),
+        config.epochs,
+    )
     progress = Progress(config.epochs, f"train adherent seeds {list(seeds)}", "epochs", logger=log)
     for epoch in range(config.epochs):
         factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
@@ -122,9 +128,14 @@ def train_adherent(
         test_mse = _test_mse(model, x_test, y_test, config.eval_batch_size).tolist()
         for k in range(members):
             row = dict.fromkeys(LOSS_COLUMNS, 0.0)
-            row.update(epoch=epoch + 1, lr=config.learning_rate * factor,
-                       train_loss=train_mse[k], train_mse=train_mse[k],
-                       test_loss=test_mse[k], test_mse=test_mse[k])  # fmt: skip
+            row.update(
+                epoch=epoch + 1,
+                lr=config.learning_rate * factor,
+                train_loss=train_mse[k],
+                train_mse=train_mse[k],
+                test_loss=test_mse[k],
+                test_mse=test_mse[k],
+            )
             history[k].append(row)
             if test_mse[k] < best_loss[k]:
                 best_loss[k], best_epoch[k] = test_mse[k], epoch + 1
@@ -137,14 +148,21 @@ def train_adherent(
     with atomic_path(out_dir) as tmp:
         for k, seed in enumerate(seeds):
             meta = {
-                "pi_weight": 0.0, "seed": int(seed), "variant": layout.variant,
-                "best_epoch": best_epoch[k], "best_test_loss": best_loss[k],
-                "epochs": config.epochs, "precision": "float32", "train_samples": n,
-                "test_samples": len(x_test), "dataset": str(dataset_path),
-                "train_clips": data.train_clips, "test_clips": data.test_clips,
+                "pi_weight": 0.0,
+                "seed": int(seed),
+                "variant": layout.variant,
+                "best_epoch": best_epoch[k],
+                "best_test_loss": best_loss[k],
+                "epochs": config.epochs,
+                "precision": "float32",
+                "train_samples": n,
+                "test_samples": len(x_test),
+                "dataset": str(dataset_path),
+                "train_clips": data.train_clips,
+                "test_clips": data.test_clips,
                 "standing": data.standing,
                 "params": {"model": as_dict(params.model), "train": as_dict(config)},
-            }  # fmt: skip
+            }
             save_model(tmp / str(seed), model.member(k), layout, data.stats, meta)  # type: ignore[arg-type]
             metas[int(seed)] = meta
     if plots_dir is not None:

@@ -56,12 +56,17 @@ def _arrays(dataset: FeatureDataset) -> dict[str, np.ndarray]:
     """The file's datasets, by name."""
     stats = dataset.stats
     arrays = {
-        "X_train": dataset.x_train, "Y_train": dataset.y_train,
-        "X_test": dataset.x_test, "Y_test": dataset.y_test,
-        "X_mean": stats.x_mean, "X_std": stats.x_std,
-        "Y_mean": stats.y_mean, "Y_std": stats.y_std,
-        "train_origin": dataset.train_origin, "test_origin": dataset.test_origin,
-    }  # fmt: skip
+        "X_train": dataset.x_train,
+        "Y_train": dataset.y_train,
+        "X_test": dataset.x_test,
+        "Y_test": dataset.y_test,
+        "X_mean": stats.x_mean,
+        "X_std": stats.x_std,
+        "Y_mean": stats.y_mean,
+        "Y_std": stats.y_std,
+        "train_origin": dataset.train_origin,
+        "test_origin": dataset.test_origin,
+    }
     if dataset.train_contacts is not None and dataset.test_contacts is not None:
         arrays["train_contacts"] = dataset.train_contacts
         arrays["test_contacts"] = dataset.test_contacts
@@ -128,8 +133,18 @@ def read_dataset(path: str | Path) -> FeatureDataset:
 
 
 def _read_open_dataset(file: h5py.File, path: Path) -> FeatureDataset:
-    needed = ("X_train", "Y_train", "X_test", "Y_test", "X_mean", "X_std", "Y_mean", "Y_std",
-              "train_origin", "test_origin")  # fmt: skip
+    needed = (
+        "X_train",
+        "Y_train",
+        "X_test",
+        "Y_test",
+        "X_mean",
+        "X_std",
+        "Y_mean",
+        "Y_std",
+        "train_origin",
+        "test_origin",
+    )
     missing = [n for n in needed if n not in file]
     missing += [f"attribute {n}" for n in ("layout", "clips", "sources") if n not in file.attrs]
     if missing:
@@ -141,9 +156,11 @@ def _read_open_dataset(file: h5py.File, path: Path) -> FeatureDataset:
         raise PimannError(path, f"{len(clips)} clips but {len(sources)} sources")
     n_in, n_out = layout.input_dim, layout.output_dim
     stats = Normalisation(
-        _array(file, path, "X_mean", (n_in,)), _array(file, path, "X_std", (n_in,)),
-        _array(file, path, "Y_mean", (n_out,)), _array(file, path, "Y_std", (n_out,)),
-    )  # fmt: skip
+        _array(file, path, "X_mean", (n_in,)),
+        _array(file, path, "X_std", (n_in,)),
+        _array(file, path, "Y_mean", (n_out,)),
+        _array(file, path, "Y_std", (n_out,)),
+    )
     if (stats.x_std <= 0).any() or (stats.y_std <= 0).any():
         raise PimannError(path, "X_std or Y_std holds values <= 0")
     split = {}
@@ -164,8 +181,17 @@ def _read_open_dataset(file: h5py.File, path: Path) -> FeatureDataset:
     (x_train, y_train, train_origin, train_contacts) = split["train"]
     (x_test, y_test, test_origin, test_contacts) = split["test"]
     return FeatureDataset(
-        x_train=x_train, y_train=y_train, x_test=x_test, y_test=y_test, stats=stats,
-        layout=layout, clips=clips, sources=sources, train_origin=train_origin,
-        test_origin=test_origin, train_contacts=train_contacts, test_contacts=test_contacts,
+        x_train=x_train,
+        y_train=y_train,
+        x_test=x_test,
+        y_test=y_test,
+        stats=stats,
+        layout=layout,
+        clips=clips,
+        sources=sources,
+        train_origin=train_origin,
+        test_origin=test_origin,
+        train_contacts=train_contacts,
+        test_contacts=test_contacts,
         standing=standing,
-    )  # fmt: skip
+    )

@@ -230,7 +230,10 @@ def window_layout(params: FeaturesParams, rate_hz: float, variant: str) -> Featu
         return tuple(int(round(s * rate_hz)) for s in seconds)
 
     return FeatureLayout(
-        frames(window.input_s), frames(window.output_s), rate_hz, variant,
+        frames(window.input_s),
+        frames(window.output_s),
+        rate_hz,
+        variant,
         pose_input=params.pose_input,
         gait_phase_step_s=params.gait_phase_step_s if params.gait_phase else None,
-    )  # fmt: skip
+    )

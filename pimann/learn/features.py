@@ -262,9 +262,13 @@ def build_dataset(
 
     def stack(side: bool) -> tuple[np.ndarray, ...]:
         items = parts[side] or [
-            (np.empty((0, layout.input_dim)), np.empty((0, layout.output_dim)), np.empty((0, 2)),
-             np.empty((0, 2)))
-        ]  # fmt: skip
+            (
+                np.empty((0, layout.input_dim)),
+                np.empty((0, layout.output_dim)),
+                np.empty((0, 2)),
+                np.empty((0, 2)),
+            )
+        ]
         x, y, origin, contacts = (np.concatenate(a) for a in zip(*items, strict=True))
         return x, y, origin.astype(np.int64), contacts.astype(bool) if with_contacts else None
 

@@ -116,10 +116,12 @@ class MANN(nn.Module):
         if self.dropout_generators is None:
             noise = torch.rand((h.shape[0],) + shape, device=h.device, dtype=dtype)
         else:
-            noise = torch.stack([
-                torch.rand(shape, generator=g, device=h.device, dtype=dtype)
-                for g in self.dropout_generators
-            ])  # fmt: skip
+            noise = torch.stack(
+                [
+                    torch.rand(shape, generator=g, device=h.device, dtype=dtype)
+                    for g in self.dropout_generators
+                ]
+            )
         mask = ((noise >= self.dropout) * (1.0 / (1.0 - self.dropout))).to(h.dtype)
         if rows is not None:
             mask = torch.cat(

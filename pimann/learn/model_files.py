@@ -110,9 +110,10 @@ def load_model(
     dims = (blob["input_dim"], blob["output_dim"])
     if dims != (layout.input_dim, layout.output_dim):
         raise PimannError(
-            path, f"input_dim, output_dim {dims} do not fit the layout's "
-            f"{(layout.input_dim, layout.output_dim)}"
-        )  # fmt: skip
+            path,
+            f"input_dim, output_dim {dims} do not fit the layout's "
+            f"{(layout.input_dim, layout.output_dim)}",
+        )
     try:
         model_params = ModelParams(**blob["model_params"])
         model = MANN(*dims, model_params, ensemble=1, seeds=[meta["seed"]])

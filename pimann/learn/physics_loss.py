@@ -39,9 +39,11 @@ class PhysicsInformedLoss(nn.Module):
     ):
         super().__init__()
         self.kinematics = TorchKinematics(
-            robot, dtype=dtype or torch.get_default_dtype(), device=device,
+            robot,
+            dtype=dtype or torch.get_default_dtype(),
+            device=device,
             frames=(LEFT_SOLE, RIGHT_SOLE),
-        )  # fmt: skip
+        )
 
     def foot_twists(self, joints: torch.Tensor, joint_velocities: torch.Tensor):
         """(J_F^B)^-1 J_F^s sdot for the left and right sole, (..., 2, 6), and the chains."""
@@ -62,9 +64,13 @@ class PhysicsInformedLoss(nn.Module):
         with torch.no_grad():
             roll, pitch = base_rpy[..., 0], base_rpy[..., 1]
             row = torch.stack(
-                (-torch.sin(pitch), torch.cos(pitch) * torch.sin(roll),
-                 torch.cos(pitch) * torch.cos(roll)), -1,
-            )  # fmt: skip
+                (
+                    -torch.sin(pitch),
+                    torch.cos(pitch) * torch.sin(roll),
+                    torch.cos(pitch) * torch.cos(roll),
+                ),
+                -1,
+            )
             return (row.unsqueeze(-2) * sole_positions).sum(-1)
 
     @staticmethod

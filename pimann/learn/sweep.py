@@ -218,13 +218,19 @@ def train_sweep(
     weight_decay = config.weight_decay / math.sqrt(math.ceil(n / batch) * config.restart_period)
     precision = pick_precision(config.precision, device)
 
-    model = MANN.from_seeds(data.layout.input_dim, data.layout.output_dim, params.model,
-                            [m.seed for m in members]).to(device).train()  # fmt: skip
+    model = (
+        MANN.from_seeds(
+            data.layout.input_dim, data.layout.output_dim, params.model, [m.seed for m in members]
+        )
+        .to(device)
+        .train()
+    )
     model.seed_dropout([0] * count)  # the generators, reseeded in place every epoch
     lr = torch.tensor(config.learning_rate, device=device)
     decay = torch.ones((), device=device)
-    optimizer = torch.optim.AdamW(model.parameters(), lr=lr, weight_decay=0.0, fused=True,
-                                  capturable=device.type == "cuda")  # fmt: skip
+    optimizer = torch.optim.AdamW(
+        model.parameters(), lr=lr, weight_decay=0.0, fused=True, capturable=device.type == "cuda"
+    )
     loss_fn = TrainingLoss.from_params(config, data.layout, data.stats, device)
     weights = torch.tensor([m.pi_weight for m in members], device=device)
     best = {k: v.detach().clone() for k, v in model.state_dict().items()}
@@ -255,10 +261,20 @@ def train_sweep(
     sizes = [batch] * (n // batch) + ([n % batch] if n % batch else [])
     clean_pass = any(m.pi_weight != 0.0 for m in members) and not config.pi_dropout
     steps = {
-        size: _Step(model, optimizer, loss_fn, (x_train, y_train), weights, decay, totals, size,
-                    clean_pass, precision)
+        size: _Step(
+            model,
+            optimizer,
+            loss_fn,
+            (x_train, y_train),
+            weights,
+            decay,
+            totals,
+            size,
+            clean_pass,
+            precision,
+        )
         for size in dict.fromkeys(sizes)
-    }  # fmt: skip
+    }
     run: dict[int, Callable[[], None]] = dict(steps)
     if graph:
         replays = _capture(list(steps.values()), model.dropout_generators or [])
@@ -267,10 +283,22 @@ def train_sweep(
     last = config.epochs if stop_after is None else min(stop_after, config.epochs)
     log.info(
         "sweep of %d models (w %s x seeds %s, %d training samples, %s) on %s, %s",
-        count, pi_weights, seeds, n, precision, device, "CUDA graph" if graph else "eager",
-    )  # fmt: skip
-    bar = Progress(config.epochs, progress or "", "epochs", initial=start, logger=log,
-                   enabled=progress is not None)  # fmt: skip
+        count,
+        pi_weights,
+        seeds,
+        n,
+        precision,
+        device,
+        "CUDA graph" if graph else "eager",
+    )
+    bar = Progress(
+        config.epochs,
+        progress or "",
+        "epochs",
+        initial=start,
+        logger=log,
+        enabled=progress is not None,
+    )
     saved_at = time.monotonic()
     member_seeds = [m.seed for m in members]
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
@@ -311,10 +339,15 @@ def train_sweep(
             )
             if checkpoint is not None and due:
                 state = {
-                    "epoch": epoch + 1, "model": model.state_dict(),
-                    "optimizer": optimizer.state_dict(), "best": best, "best_loss": best_loss,
-                    "best_epoch": best_epoch, "history": history, "fingerprint": fingerprint,
-                }  # fmt: skip
+                    "epoch": epoch + 1,
+                    "model": model.state_dict(),
+                    "optimizer": optimizer.state_dict(),
+                    "best": best,
+                    "best_loss": best_loss,
+                    "best_epoch": best_epoch,
+                    "history": history,
+                    "fingerprint": fingerprint,
+                }
                 with atomic_path(checkpoint) as tmp:
                     torch.save(state, tmp)
                 saved_at = time.monotonic()
@@ -322,8 +355,16 @@ def train_sweep(
     if last < config.epochs:
         return None
     model.load_state_dict(best)
-    return _results(model, members, best_epoch, best_loss, history, config.learning_rate,
-                    config.restart_period, config.restart_mult)  # fmt: skip
+    return _results(
+        model,
+        members,
+        best_epoch,
+        best_loss,
+        history,
+        config.learning_rate,
+        config.restart_period,
+        config.restart_mult,
+    )
 
 
 def _results(
@@ -346,13 +387,18 @@ def _results(
         table = []
         for epoch in range(epochs):
             train_mse, train_pi, test_mse, test_pi = rows[epoch, :, k].tolist()
-            table.append({
-                "epoch": epoch + 1,
-                "lr": learning_rate * schedule_factor(epoch, period, mult),
-                "train_loss": train_mse + w * train_pi, "train_mse": train_mse,
-                "train_pi": train_pi, "test_loss": test_mse + w * test_pi,
-                "test_mse": test_mse, "test_pi": test_pi,
-            })  # fmt: skip
+            table.append(
+                {
+                    "epoch": epoch + 1,
+                    "lr": learning_rate * schedule_factor(epoch, period, mult),
+                    "train_loss": train_mse + w * train_pi,
+                    "train_mse": train_mse,
+                    "train_pi": train_pi,
+                    "test_loss": test_mse + w * test_pi,
+                    "test_mse": test_mse,
+                    "test_pi": test_pi,
+                }
+            )
         results[member] = {
             "state_dict": {name: value[k : k + 1].clone() for name, value in state.items()},
             "best_epoch": int(best_epoch[k]),
@@ -389,8 +435,15 @@ def train_from_sweep(
     trained = folder / "members.pt"
     if not trained.is_file():
         folder.mkdir(parents=True, exist_ok=True)
-        results = train_sweep(dataset_path, pi_weights, seeds, params, device,
-                              checkpoint=folder / "checkpoint.pt", data=data)  # fmt: skip
+        results = train_sweep(
+            dataset_path,
+            pi_weights,
+            seeds,
+            params,
+            device,
+            checkpoint=folder / "checkpoint.pt",
+            data=data,
+        )
         assert results is not None  # no stop_after
         with atomic_path(trained) as tmp:
             torch.save({_key(m.pi_weight, m.seed): r for m, r in results.items()}, tmp)
@@ -401,8 +454,17 @@ def train_from_sweep(
     members = {seed: saved[_key(float(pi_weight), seed)] for seed in seeds}
     samples = len(training_subset(len(data.x_train), params.train.max_train_samples))
     precision = pick_precision(params.train.precision, torch.device(device))
-    metas = write_models(out_dir, plots_dir, dataset_path, data, float(pi_weight), members,
-                         params, precision, samples)  # fmt: skip
+    metas = write_models(
+        out_dir,
+        plots_dir,
+        dataset_path,
+        data,
+        float(pi_weight),
+        members,
+        params,
+        precision,
+        samples,
+    )
     written_file = folder / "written.json"
     written = set(json.loads(written_file.read_text())) if written_file.is_file() else set()
     written.add(float(pi_weight))

@@ -188,25 +188,43 @@ def train_models(
     # one progress for the stage: the first group's (the groups keep pace with each other)
     progress = f"train {out_dir.name} seeds {groups[0]}"
     jobs = [
-        _GroupJob(dataset_path, group, pi_weight, params, str(device), checkpoint_dir,
-                  stop_after, max(1, threads // workers), precision,
-                  progress if k == 0 else None)
+        _GroupJob(
+            dataset_path,
+            group,
+            pi_weight,
+            params,
+            str(device),
+            checkpoint_dir,
+            stop_after,
+            max(1, threads // workers),
+            precision,
+            progress if k == 0 else None,
+        )
         for k, group in enumerate(groups)
-    ]  # fmt: skip
+    ]
     n = len(data.x_train)
     if config.max_train_samples is not None:
         n = min(n, config.max_train_samples)
     log.info(
         "%s (w=%g, %s data, %d of %d training samples, %s): seeds %s in %d process(es) "
-        "of %d thread(s)", out_dir.name, pi_weight, data.layout.variant, n, len(data.x_train),
-        precision, groups, workers, max(1, threads // workers),
-    )  # fmt: skip
+        "of %d thread(s)",
+        out_dir.name,
+        pi_weight,
+        data.layout.variant,
+        n,
+        len(data.x_train),
+        precision,
+        groups,
+        workers,
+        max(1, threads // workers),
+    )
     results = pool_map(_train_group, jobs, workers, None)
     if any(result is None for result in results):
         return {}  # stopped early (stop_after)
     members = {seed: member for result in results for seed, member in result.items()}
-    metas = write_models(out_dir, plots_dir, dataset_path, data, pi_weight, members, params,
-                         precision, n)  # fmt: skip
+    metas = write_models(
+        out_dir, plots_dir, dataset_path, data, pi_weight, members, params, precision, n
+    )
     shutil.rmtree(checkpoint_dir, ignore_errors=True)  # done: a rerun starts afresh
     return metas
 
@@ -270,9 +288,14 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
         fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
         members = len(seeds)
         state = _State(
-            0, {}, {}, {k: v.detach().clone() for k, v in model.state_dict().items()},
-            [math.inf] * members, [-1] * members, [[] for _ in seeds],
-        )  # fmt: skip
+            0,
+            {},
+            {},
+            {k: v.detach().clone() for k, v in model.state_dict().items()},
+            [math.inf] * members,
+            [-1] * members,
+            [[] for _ in seeds],
+        )
         if checkpoint.is_file():
             saved = torch.load(checkpoint, map_location=device, weights_only=True)
             if saved.get("fingerprint") == fingerprint and saved["epoch"] <= config.epochs:
@@ -286,9 +309,13 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
         with_pi = pi_weight != 0.0
         last = config.epochs if job.stop_after is None else min(job.stop_after, config.epochs)
         progress = Progress(
-            config.epochs, job.progress or "", "epochs", initial=state.epoch, logger=log,
+            config.epochs,
+            job.progress or "",
+            "epochs",
+            initial=state.epoch,
+            logger=log,
             enabled=job.progress is not None,
-        )  # fmt: skip
+        )
         for epoch in range(state.epoch, last):
             factor = schedule_factor(epoch, config.restart_period, config.restart_mult)
             for group in optimizer.param_groups:
@@ -331,10 +358,13 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
             for k in range(members):
                 row = {"epoch": epoch + 1, "lr": config.learning_rate * factor}
                 row.update(
-                    train_loss=train_mse[k] + pi_weight * train_pi[k], train_mse=train_mse[k],
-                    train_pi=train_pi[k], test_loss=test_mse[k] + pi_weight * test_pi[k],
-                    test_mse=test_mse[k], test_pi=test_pi[k],
-                )  # fmt: skip
+                    train_loss=train_mse[k] + pi_weight * train_pi[k],
+                    train_mse=train_mse[k],
+                    train_pi=train_pi[k],
+                    test_loss=test_mse[k] + pi_weight * test_pi[k],
+                    test_mse=test_mse[k],
+                    test_pi=test_pi[k],
+                )
                 state.history[k].append(row)
                 if row["test_loss"] < state.best_loss[k]:
                     state.best_loss[k], state.best_epoch[k] = row["test_loss"], epoch + 1
@@ -344,9 +374,13 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
             progress.update(postfix=f"train {mean['train_loss']:.4f}, test {mean['test_loss']:.4f}")
             log.debug(
                 "w=%g seeds %s epoch %d/%d: train %.5f (mse %.5f, pi %.5f), test %.5f "
-                "(mse %.5f, pi %.5f)", pi_weight, seeds, epoch + 1, config.epochs,
+                "(mse %.5f, pi %.5f)",
+                pi_weight,
+                seeds,
+                epoch + 1,
+                config.epochs,
                 *(mean[c] for c in LOSS_COLUMNS),
-            )  # fmt: skip
+            )
             state.epoch = epoch + 1
             state.model, state.optimizer = model.state_dict(), optimizer.state_dict()
             with atomic_path(checkpoint) as tmp:
@@ -391,14 +425,21 @@ def write_models(
     with atomic_path(out_dir) as tmp:
         for seed, member in members.items():
             meta = {
-                "pi_weight": pi_weight, "seed": seed, "variant": data.layout.variant,
-                "best_epoch": member["best_epoch"], "best_test_loss": member["best_loss"],
-                "epochs": config.epochs, "precision": precision, "train_samples": train_samples,
+                "pi_weight": pi_weight,
+                "seed": seed,
+                "variant": data.layout.variant,
+                "best_epoch": member["best_epoch"],
+                "best_test_loss": member["best_loss"],
+                "epochs": config.epochs,
+                "precision": precision,
+                "train_samples": train_samples,
                 "test_samples": len(data.x_test),
-                "dataset": str(dataset_path), "train_clips": data.train_clips,
-                "test_clips": data.test_clips, "standing": data.standing,
+                "dataset": str(dataset_path),
+                "train_clips": data.train_clips,
+                "test_clips": data.test_clips,
+                "standing": data.standing,
                 "params": {"model": as_dict(params.model), "train": as_dict(config)},
-            }  # fmt: skip
+            }
             model = MANN(data.layout.input_dim, data.layout.output_dim, params.model, seeds=[seed])
             model.load_state_dict(member["state_dict"])
             save_model(tmp / str(seed), model, data.layout, data.stats, meta)

@@ -73,8 +73,13 @@ class TrainingLoss(torch.nn.Module):
         device: torch.device,
     ) -> TrainingLoss:
         """The loss the trainers minimise, as `train` sets it (one place for both trainers)."""
-        return cls(layout, stats, device, pi_configuration=train.pi_configuration,
-                   pi_gradient=train.pi_gradient)  # fmt: skip
+        return cls(
+            layout,
+            stats,
+            device,
+            pi_configuration=train.pi_configuration,
+            pi_gradient=train.pi_gradient,
+        )
 
     def pi_terms(self, y: torch.Tensor) -> dict[str, torch.Tensor]:
         """Denormalised quantities of y (..., out) that L_B needs, by argument name."""

@@ -46,10 +46,19 @@ class DrawnPerson(Protocol):
 
 
 __all__ = [
-    "FORMATS", "LEFT_COLOUR", "RIGHT_COLOUR", "STRIP_FRAMES", "Skeleton", "check_output",
-    "human_skeleton", "match_frames", "render_trajectory", "robot_skeleton",
-    "strip_frame_indices", "write_pictures",
-]  # fmt: skip
+    "FORMATS",
+    "LEFT_COLOUR",
+    "RIGHT_COLOUR",
+    "STRIP_FRAMES",
+    "Skeleton",
+    "check_output",
+    "human_skeleton",
+    "match_frames",
+    "render_trajectory",
+    "robot_skeleton",
+    "strip_frame_indices",
+    "write_pictures",
+]
 
 STRIP_FRAMES = 12  # frames of a .png strip: one about every step of a 10 s walk
 STRIP_SIZE = (480, 320)  # px of each strip frame (an animation's default: 960 x 480)

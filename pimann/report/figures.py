@@ -90,13 +90,17 @@ def fig_pi_weight_comparison(
             showmeans=True,
             widths=0.6,
             medianprops={"color": "tab:orange", "linewidth": 1.2},
-            meanprops={"marker": "D", "markerfacecolor": "black", "markeredgecolor": "black",
-                       "markersize": 3},
+            meanprops={
+                "marker": "D",
+                "markerfacecolor": "black",
+                "markeredgecolor": "black",
+                "markersize": 3,
+            },
             flierprops={"markersize": 2},
             boxprops={"linewidth": 0.6},
             whiskerprops={"linewidth": 0.6},
             capprops={"linewidth": 0.6},
-        )  # fmt: skip
+        )
         for patch, w in zip(boxes["boxes"], weights, strict=True):
             patch.set_facecolor((*colours[float(w)][:3], 0.35))
         name = paper_baseline(frame)
@@ -105,8 +109,13 @@ def fig_pi_weight_comparison(
             ax.axhline(baseline.median(), color=BASELINE_COLOUR, ls="--", lw=1.0, label=name)
         if (level := results.data_level(metric)) is not None:
             ax.axhline(level, color=DATA_COLOUR, ls=":", lw=1.0, label="data")
-        ax.axhline(PAPER_BASELINE_RMSE[kind], color=BASELINE_COLOUR, ls="-.", lw=0.8,
-                   label="paper's baseline")  # fmt: skip
+        ax.axhline(
+            PAPER_BASELINE_RMSE[kind],
+            color=BASELINE_COLOUR,
+            ls="-.",
+            lw=0.8,
+            label="paper's baseline",
+        )
         ax.set_xlabel("PI weight $w$")
         ax.set_title(f"{kind} ({unit}, summed)")
         ax.set_ylim(bottom=0)
@@ -171,8 +180,13 @@ def fig_ground_projection(
     ax.axhline(0.0, color="black", lw=0.6, ls=":", label="desired direction")
     for name, table in series.items():
         _, colour, line = CONDITIONS[name]
-        ax.plot(table["base_x"], table["base_y"], color=colour, ls=line,
-                label=_condition_title(results, name))  # fmt: skip
+        ax.plot(
+            table["base_x"],
+            table["base_y"],
+            color=colour,
+            ls=line,
+            label=_condition_title(results, name),
+        )
         ax.plot(table["base_x"].iloc[-1], table["base_y"].iloc[-1], "o", color=colour, ms=2.5)
     ax.set_xlabel("$x$ (m)")
     ax.set_ylabel("$y$ (m)")
@@ -202,13 +216,23 @@ def fig_foot_rotations(
     fig, axes = new_figure(figures, 2.8, 2, 1, sharex=True, sharey=True)
     for ax, side in zip(axes, ("left", "right"), strict=True):
         for weight, table in feet.items():
-            ax.plot(table["time"], np.degrees(table[f"{side}_sole_pitch"]),
-                    color=colours[weight], label=f"$w$={weight:g}", lw=0.8)  # fmt: skip
+            ax.plot(
+                table["time"],
+                np.degrees(table[f"{side}_sole_pitch"]),
+                color=colours[weight],
+                label=f"$w$={weight:g}",
+                lw=0.8,
+            )
         ax.set_title(f"{side} foot", fontsize="small", pad=2)
     fig.supylabel("sole pitch (deg)", fontsize=figures.font_pt)
     axes[-1].set_xlabel("time (s)")
-    fig.legend(*axes[0].get_legend_handles_labels(), loc="outside upper center",
-               ncols=min(len(feet), 5), columnspacing=0.8, handlelength=1.0)  # fmt: skip
+    fig.legend(
+        *axes[0].get_legend_handles_labels(),
+        loc="outside upper center",
+        ncols=min(len(feet), 5),
+        columnspacing=0.8,
+        handlelength=1.0,
+    )
     return fig
 
 
@@ -221,15 +245,24 @@ def fig_foot_heights(
     if not weights:
         log.info("foot_heights: no feet time series for w in %s", evaluate.foot_height_weights)
         return None
-    fig, axes = new_figure(figures, 1.2 + 1.0 * len(weights), len(weights), 1, sharex=True,
-                        sharey=True, squeeze=False)  # fmt: skip
+    fig, axes = new_figure(
+        figures, 1.2 + 1.0 * len(weights), len(weights), 1, sharex=True, sharey=True, squeeze=False
+    )
     for ax, weight in zip(axes[:, 0], weights, strict=True):
         table = feet[weight]
         for side, colour in SIDE_COLOURS.items():
             ax.plot(table["time"], 100 * table[f"{side}_foot_height"], color=colour, label=side)
             contact = table[f"{side}_contact"].to_numpy(bool)
-            ax.fill_between(table["time"], 0, 1, where=contact, color=colour, alpha=CONTACT_ALPHA,
-                            lw=0, transform=ax.get_xaxis_transform())  # fmt: skip
+            ax.fill_between(
+                table["time"],
+                0,
+                1,
+                where=contact,
+                color=colour,
+                alpha=CONTACT_ALPHA,
+                lw=0,
+                transform=ax.get_xaxis_transform(),
+            )
         ax.set_title(f"$w$={weight:g}", fontsize="small", pad=2)
         ax.set_ylabel("foot height (cm)")
     axes[-1, 0].set_xlabel("time (s)")
@@ -247,8 +280,11 @@ def _read_sim(path: Path) -> dict[str, np.ndarray] | None:
             if not {"time", "joints_reference", "joints_measured"} <= set(file):
                 return None
             names = [str(n) for n in file.attrs.get("joint_names", JOINT_NAMES)]
-            out = {k: file[k][()] for k in ("time", "joints_reference", "joints_measured",
-                                            "joints_generated") if k in file}  # fmt: skip
+            out = {
+                k: file[k][()]
+                for k in ("time", "joints_reference", "joints_measured", "joints_generated")
+                if k in file
+            }
     else:
         table = pd.read_csv(path)
         names = [c.removesuffix("_measured") for c in table if c.endswith("_measured")]
@@ -294,27 +330,37 @@ def fig_joint_tracking(
         fig, axes = new_figure(figures, 2.8, 2, 2, sharex=True, squeeze=False)
         panels = [(ax, joint, shown[0]) for ax, joint in zip(axes.flat, joints, strict=False)]
     else:  # a row per joint, a column per controller
-        fig, axes = new_figure(figures, 1.3 * len(joints) + 0.6, len(joints), 2, sharex=True,
-                               squeeze=False)  # fmt: skip
+        fig, axes = new_figure(
+            figures, 1.3 * len(joints) + 0.6, len(joints), 2, sharex=True, squeeze=False
+        )
         panels = [(axes[r, c], joint, shown[c]) for r, joint in enumerate(joints) for c in (0, 1)]
     for ax, joint, (controller, _, run) in panels:
         k = list(run["names"]).index(joint)
         for kind, colour, line, width, z in JOINT_TRACES:
             if f"joints_{kind}" in run:
-                ax.plot(run["time"], np.degrees(run[f"joints_{kind}"][:, k]), color=colour,
-                        ls=line, label=kind, lw=width, zorder=z,
-                        alpha=0.6 if kind == "measured" else 1.0)  # fmt: skip
+                ax.plot(
+                    run["time"],
+                    np.degrees(run[f"joints_{kind}"][:, k]),
+                    color=colour,
+                    ls=line,
+                    label=kind,
+                    lw=width,
+                    zorder=z,
+                    alpha=0.6 if kind == "measured" else 1.0,
+                )
         title = joint.replace("_", " ")
-        ax.set_title(title if len(shown) == 1 else f"{title}, {controller}", fontsize="small",
-                     pad=2)  # fmt: skip
+        ax.set_title(
+            title if len(shown) == 1 else f"{title}, {controller}", fontsize="small", pad=2
+        )
     for ax in axes[-1]:
         ax.set_xlabel("time (s)")
     for ax in axes[:, 0]:
         ax.set_ylabel("angle (deg)")
     handles, labels = axes[0, 0].get_legend_handles_labels()
     order = [labels.index(k) for k in ("generated", "reference", "measured") if k in labels]
-    fig.legend([handles[i] for i in order], [labels[i] for i in order],
-               loc="outside lower center", ncols=3)  # below: the title is above  # fmt: skip
+    fig.legend(
+        [handles[i] for i in order], [labels[i] for i in order], loc="outside lower center", ncols=3
+    )  # below: the title is above
     which = " and online controllers" if len(shown) > 1 else " controller"
     fig.suptitle(f"MuJoCo, offline{which} ({path.stem})", fontsize="small")
     return fig

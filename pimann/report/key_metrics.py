@@ -54,8 +54,13 @@ from pimann.evaluate.claims import (
 METRICS_FILE = "metrics.json"
 MAX_VALUES = 100  # `dvc metrics show` stays readable
 DIGITS = 4  # significant digits: a seed's spread is far wider than the fifth
-STATUS_CODES = {HOLDS: 1.0, WITHIN_SPREAD: 0.5, STANDS_STILL: 0.25, FAILS: 0.0,
-                NOT_COMPARABLE: -1.0}  # fmt: skip
+STATUS_CODES = {
+    HOLDS: 1.0,
+    WITHIN_SPREAD: 0.5,
+    STANDS_STILL: 0.25,
+    FAILS: 0.0,
+    NOT_COMPARABLE: -1.0,
+}
 HEADLINE = {  # key: metrics.csv column, medians per model on the scenario, unsteered
     "sliding_linear": "support_rmse_paper_linear_total",  # the authors' metric
     "sliding_angular": "support_rmse_paper_angular_total",

@@ -39,15 +39,29 @@ MEDIA_TYPES = {".png": "image/png", ".gif": "image/gif", ".mp4": "video/mp4"}
 VIDEO_SUFFIXES = (".mp4", ".gif")
 HEADLINE_FIGURES = ("pi_weight_comparison", "base_displacement")  # sliding by w; drift, steering
 CLAIM_MARKS = {  # claims.md status: (mark, CSS class)
-    "holds": ("\u2714", "holds"), "holds within seed spread": ("\u2248", "spread"),
-    "holds (model stands still)": ("\u25d0", "still"), "does not hold": ("\u2718", "fails"),
-    "not comparable": ("\u2013", "na"), "reference": ("\u25cf", "reference"),
-}  # fmt: skip
+    "holds": ("\u2714", "holds"),
+    "holds within seed spread": ("\u2248", "spread"),
+    "holds (model stands still)": ("\u25d0", "still"),
+    "does not hold": ("\u2718", "fails"),
+    "not comparable": ("\u2013", "na"),
+    "reference": ("\u25cf", "reference"),
+}
 SIM_COLUMNS = (  # sim_summary.json run fields shown in the simulation table
-    "model", "seed", "scenario", "steering", "controller", "success", "fallen", "fall_time_s",
-    "simulated_s", "distance_walked_m", "steps", "foot_slip_m", "joint_rmse_rad",
+    "model",
+    "seed",
+    "scenario",
+    "steering",
+    "controller",
+    "success",
+    "fallen",
+    "fall_time_s",
+    "simulated_s",
+    "distance_walked_m",
+    "steps",
+    "foot_slip_m",
+    "joint_rmse_rad",
     "zmp_error_rms_m",
-)  # fmt: skip
+)
 STYLE = """
 body { font-family: system-ui, sans-serif; margin: 1.5em auto; max-width: 1400px;
        padding: 0 1em; color: #222; line-height: 1.4; }
@@ -176,9 +190,11 @@ def _simulation(results: Path) -> str:
     table = _table(["run", *SIM_COLUMNS[1:]], rows)
     pushes = [  # per rollout, controller and direction: the largest push survived (N)
         [name, controller, direction, force]
-        for name, study in (summary.get("pushes") or {}).items() if "failed" not in study
-        for controller, row in study.items() for direction, force in row.items()
-    ]  # fmt: skip
+        for name, study in (summary.get("pushes") or {}).items()
+        if "failed" not in study
+        for controller, row in study.items()
+        for direction, force in row.items()
+    ]
     if pushes:
         table += "<p>Push recovery: the largest 0.1 s push on the base survived (N).</p>"
         table += _table(["rollout", "controller", "direction", "largest push (N)"], pushes)
@@ -194,10 +210,16 @@ def _stage_times(summary: dict[str, Any]) -> str:
             "records every stage it runs.</p>"
         )
     rows = [
-        [r["stage"], r["wall_s"] / 60.0, r.get("started"), r.get("profile"), r.get("cpus"),
-         r.get("torch_device")]
+        [
+            r["stage"],
+            r["wall_s"] / 60.0,
+            r.get("started"),
+            r.get("profile"),
+            r.get("cpus"),
+            r.get("torch_device"),
+        ]
         for r in summary["stages"]
-    ]  # fmt: skip
+    ]
     rows.append(["total", summary["total_wall_s"] / 60.0, None, None, None, None])
     return (
         "<p>Wall time of each stage in the run that made its outputs (a stage DVC skipped "

@@ -26,8 +26,13 @@ def _value(value: Any, digits: int = 3) -> str:
 
 
 # the sliding columns of the table, as the key metrics name them (pimann.report.key_metrics)
-SLIDING = ("sliding_linear", "sliding_angular", "sliding_lowest_corner", "sliding_position",
-           "sliding_contact_point")  # fmt: skip
+SLIDING = (
+    "sliding_linear",
+    "sliding_angular",
+    "sliding_lowest_corner",
+    "sliding_position",
+    "sliding_contact_point",
+)
 
 
 def _models(metrics: dict[str, Any]) -> list[str]:

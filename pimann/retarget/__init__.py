@@ -50,8 +50,9 @@ def solve_joints(
     ]
     targets = segment_targets(motion, params)
     first = RetargetIK(robot, params, rate)
-    free = np.array([_solve(first, motion, t, placements[t], targets[t, 1:]) for t in
-                     range(motion.n_frames)])  # fmt: skip
+    free = np.array(
+        [_solve(first, motion, t, placements[t], targets[t, 1:]) for t in range(motion.n_frames)]
+    )
     soles = foot_kinematics(robot, free)
     plan = plan_soles(soles.positions, yaw_of(soles.rotations), contacts, motion.time, params)
     targets = segment_targets(motion, params, plan.headings)

@@ -99,11 +99,18 @@ def human_contacts(motion: HumanMotion, params: RetargetParams) -> np.ndarray:
     contacts = np.empty((motion.n_frames, 2), bool)
     for side in range(2):
         down = np.stack(
-            [hysteresis(on[:, side, p], off[:, side, p], bool(on[0, side, p]),
-                        points[:, side, p, :2], params.release_travel)
-             for p in range(points.shape[2])],
+            [
+                hysteresis(
+                    on[:, side, p],
+                    off[:, side, p],
+                    bool(on[0, side, p]),
+                    points[:, side, p, :2],
+                    params.release_travel,
+                )
+                for p in range(points.shape[2])
+            ],
             axis=-1,
-        ).any(axis=-1)  # fmt: skip
+        ).any(axis=-1)
         contacts[:, side] = debounce(down, min_on, min_off)
     feet = [SEGMENTS.index("LeftFoot"), SEGMENTS.index("RightFoot")]
     headings = np.unwrap(yaw_of(motion.orientations[:, feet]), axis=0)
@@ -278,8 +285,7 @@ def _open_ends(
         _open_swing(plan, side, head, first[0], first[2:], free, free_yaw, time, vertical, params)
     if last[1] < len(free):
         tail = slice(last[1] - 1, None)
-        _open_swing(plan, side, tail, last[1] - 1, last[2:], free, free_yaw, time, vertical,
-                    params)  # fmt: skip
+        _open_swing(plan, side, tail, last[1] - 1, last[2:], free, free_yaw, time, vertical, params)
 
 
 def _open_swing(

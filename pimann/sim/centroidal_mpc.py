@@ -105,12 +105,21 @@ class MpcSolution:
 # each QP solver's options: silent, accurate enough to agree with ipopt's solution, warm
 # started in primal and dual where the solver can be
 QP_OPTIONS = {
-    "osqp": {"osqp": {"verbose": False, "eps_abs": 1e-8, "eps_rel": 1e-8, "max_iter": 20000,
-                      "polish": True}, "warm_start_primal": True, "warm_start_dual": True},
+    "osqp": {
+        "osqp": {
+            "verbose": False,
+            "eps_abs": 1e-8,
+            "eps_rel": 1e-8,
+            "max_iter": 20000,
+            "polish": True,
+        },
+        "warm_start_primal": True,
+        "warm_start_dual": True,
+    },
     "piqp": {},
     "proxqp": {"proxqp": {"eps_abs": 1e-7}, "warm_start_primal": True, "warm_start_dual": True},
     "qrqp": {"print_iter": False, "print_header": False},
-}  # fmt: skip
+}
 
 
 class SequentialQp:
@@ -137,8 +146,13 @@ class SequentialQp:
         hessian, gradient = ca.hessian(opti.f, x)
         jacobian = ca.jacobian(opti.g, x)
         offset = opti.g - ca.mtimes(jacobian, x)  # g(x) = offset + J x, near the point
-        outputs = [hessian, gradient - ca.mtimes(hessian, x), jacobian,
-                   opti.lbg - offset, opti.ubg - offset]  # fmt: skip
+        outputs = [
+            hessian,
+            gradient - ca.mtimes(hessian, x),
+            jacobian,
+            opti.lbg - offset,
+            opti.ubg - offset,
+        ]
         self.data = ca.Function("qp_data", [opti.p, x], outputs).expand()
         self.pack_parameters = ca.Function("pack_parameters", parameters, [opti.p])
         self.pack = ca.Function("pack", variables, [x])
@@ -223,8 +237,22 @@ class CentroidalMPC:
         p_com_ref = opti.parameter(3, n + 1)
         p_l_ref = opti.parameter(3, n + 1)
         p_external = opti.parameter(3)
-        parameters = [p_c0, p_dc0, p_l0, *p_feet0, *p_contact, *p_cos, *p_sin, *p_nominal,
-                      *p_lower, *p_upper, *p_landing, p_com_ref, p_l_ref, p_external]  # fmt: skip
+        parameters = [
+            p_c0,
+            p_dc0,
+            p_l0,
+            *p_feet0,
+            *p_contact,
+            *p_cos,
+            *p_sin,
+            *p_nominal,
+            *p_lower,
+            *p_upper,
+            *p_landing,
+            p_com_ref,
+            p_l_ref,
+            p_external,
+        ]
         x, u = [], []
         for k in range(n + 1):  # declared in stage order: x_0, u_0, x_1, ...
             x.append(opti.variable(NX))
@@ -252,8 +280,11 @@ class CentroidalMPC:
                     cos, sin = p_cos[side][k], p_sin[side][k]
                     for j in range(4):
                         f = uk[_force(side, j)]
-                        arm = ca.vertcat(cos * local[j, 0] - sin * local[j, 1],
-                                         sin * local[j, 0] + cos * local[j, 1], 0.0)  # fmt: skip
+                        arm = ca.vertcat(
+                            cos * local[j, 0] - sin * local[j, 1],
+                            sin * local[j, 0] + cos * local[j, 1],
+                            0.0,
+                        )
                         total += a * f
                         torque += a * ca.cross(arm + xk[_sole(side)] - c, f)
                     soles.append(xk[_sole(side)] + (1 - a) * uk[_swing(side)] * dt)
@@ -314,15 +345,20 @@ class CentroidalMPC:
         if solver.startswith("rti-"):
             options = dict(solver_options or {})
             iterations = int(options.pop("iterations", params.sqp_iterations))
-            self.sqp = SequentialQp(opti, parameters, self.variables, solver[4:], options,
-                                    iterations)  # fmt: skip
+            self.sqp = SequentialQp(
+                opti, parameters, self.variables, solver[4:], options, iterations
+            )
             return
         # expanded to scalar graphs: twice as fast per iteration as the matrix graph; a failed
         # solve is read from the stats (an exception would print every input to stdout)
         options = {"print_time": False, "error_on_fail": False, "expand": True}
         if solver == "ipopt":
-            inner = {"print_level": 0, "sb": "yes", "max_iter": params.max_iterations,
-                     "linear_solver": "mumps"}  # fmt: skip
+            inner = {
+                "print_level": 0,
+                "sb": "yes",
+                "max_iter": params.max_iterations,
+                "linear_solver": "mumps",
+            }
             options.update(solver_options or {})
             opti.solver("ipopt", options, inner)
         elif solver == "fatrop":
@@ -336,9 +372,10 @@ class CentroidalMPC:
             opti.solver(solver, options)
         # the constraints' multipliers travel too: ipopt's warm start needs them
         self.function = opti.to_function(
-            "centroidal_mpc", parameters + self.variables + [opti.lam_g],
+            "centroidal_mpc",
+            parameters + self.variables + [opti.lam_g],
             self.variables + [opti.lam_g],
-        )  # fmt: skip
+        )
 
     def _guess(self, problem: MpcProblem) -> list[np.ndarray]:
         """A standing start: the CoM where it is, the weight on the feet in contact."""
@@ -367,14 +404,21 @@ class CentroidalMPC:
     def solve(self, problem: MpcProblem) -> MpcSolution:
         """Solve one horizon; a failed solve raises PimannError with the solver's status."""
         inputs = [
-            problem.com, problem.com_velocity, problem.angular_momentum,
-            *problem.feet, *problem.contact[:, None, :],
-            *np.cos(problem.yaw)[:, None, :], *np.sin(problem.yaw)[:, None, :],
-            *problem.nominal.transpose(0, 2, 1), *problem.lower.transpose(0, 2, 1),
-            *problem.upper.transpose(0, 2, 1), *problem.landing[:, None, :],
-            problem.com_reference.T, problem.angular_momentum_reference.T,
+            problem.com,
+            problem.com_velocity,
+            problem.angular_momentum,
+            *problem.feet,
+            *problem.contact[:, None, :],
+            *np.cos(problem.yaw)[:, None, :],
+            *np.sin(problem.yaw)[:, None, :],
+            *problem.nominal.transpose(0, 2, 1),
+            *problem.lower.transpose(0, 2, 1),
+            *problem.upper.transpose(0, 2, 1),
+            *problem.landing[:, None, :],
+            problem.com_reference.T,
+            problem.angular_momentum_reference.T,
             problem.external_force,
-        ]  # fmt: skip
+        ]
         start, cpu = time.perf_counter(), time.process_time()
         if self.sqp is not None:
             return self._solve_sqp(inputs, problem, start, cpu)
@@ -433,8 +477,9 @@ class CentroidalMPC:
         controls = np.hstack(values[1::2]).T  # (N, NU)
         feet = np.array([states[:, _sole(side)] for side in (0, 1)])
         forces = np.array([[controls[:, _force(s, j)] for j in range(4)] for s in (0, 1)])
-        return MpcSolution(states[:, COM], states[:, VELOCITY], states[:, MOMENTUM], feet,
-                           forces, elapsed, cpu)  # fmt: skip
+        return MpcSolution(
+            states[:, COM], states[:, VELOCITY], states[:, MOMENTUM], feet, forces, elapsed, cpu
+        )
 
 
 def horizon_problem(

@@ -34,9 +34,22 @@ from pimann.sim.synthetic import standing_feet
 from pimann.sim.wbc import IKTargets, LowPass, WholeBodyIK, standing_pose, zmp_com_feedback
 
 TRACE_KEYS = (
-    "t", "ref", "meas", "gen", "com_ref", "com", "zmp_ref", "zmp", "h", "ik", "soles", "soles_ref",
-    "base", "forces", "com_world",
-)  # fmt: skip
+    "t",
+    "ref",
+    "meas",
+    "gen",
+    "com_ref",
+    "com",
+    "zmp_ref",
+    "zmp",
+    "h",
+    "ik",
+    "soles",
+    "soles_ref",
+    "base",
+    "forces",
+    "com_world",
+)
 SETTLE_S = 0.05  # s after touchdown before a stance foot's position is taken as its anchor
 log = logging.getLogger(__name__)
 
@@ -225,11 +238,22 @@ def simulate_plan(
             slip[side] = max(slip[side], float(np.linalg.norm(soles[side, :2] - anchor)))
         com_after, _, zmp_ref_after = reference.at(t + dt)
         values = (
-            t + dt, joints, sim.joints(data), generated, com_after,
-            sim.com(data) - np.append(drift.value, 0.0), zmp_ref_after,
-            zmp_filter.value - drift.value, sim.base_height(data), ik_error, soles, planned,
-            np.concatenate([data.qpos[:3], np.roll(data.qpos[3:7], -1)]), load, sim.com(data),
-        )  # fmt: skip
+            t + dt,
+            joints,
+            sim.joints(data),
+            generated,
+            com_after,
+            sim.com(data) - np.append(drift.value, 0.0),
+            zmp_ref_after,
+            zmp_filter.value - drift.value,
+            sim.base_height(data),
+            ik_error,
+            soles,
+            planned,
+            np.concatenate([data.qpos[:3], np.roll(data.qpos[3:7], -1)]),
+            load,
+            sim.com(data),
+        )
         for key, value in zip(TRACE_KEYS, values, strict=True):
             trace[key].append(value)
         if sim.base_height(data) < params.fall_height:
@@ -292,6 +316,13 @@ def simulate_trajectory(
         raise PimannError(trajectory.source, f"unknown controller {controller!r}")
     online = OnlineReference(plan, dcm, params) if controller == "online" else None
     return simulate_plan(
-        plan, dcm, params, q0, _posture_from_trajectory(trajectory, plan), duration, robot,
-        online=online, push=push,
-    )  # fmt: skip
+        plan,
+        dcm,
+        params,
+        q0,
+        _posture_from_trajectory(trajectory, plan),
+        duration,
+        robot,
+        online=online,
+        push=push,
+    )

@@ -86,7 +86,8 @@ def com_reference(
         weight *= 1.0 - _smoothstep((times - end) / fade_out)
     else:
         weight[times > end] = 0.0
-    feet = np.array([[(*pose[:2], yaw) for pose, yaw in (plan.foot_pose(s, t) for s in (0, 1))]
-                     for t in times])  # fmt: skip
+    feet = np.array(
+        [[(*pose[:2], yaw) for pose, yaw in (plan.foot_pose(s, t) for s in (0, 1))] for t in times]
+    )
     mid = mid_feet(feet)
     return mid[:, :2] + from_heading_frame(weight[:, None] * offset, mid[:, 2])

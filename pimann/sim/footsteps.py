@@ -238,10 +238,14 @@ def extract_footsteps(
     last = robot_time[-1] + hold
     runs = [true_runs(contacts[:, side]) for side in (0, 1)]
     generated = [
-        np.array([[*soles[a:b, side, :2].mean(axis=0), _mean_angle(soles[a:b, side, 2])]
-                  for a, b in runs[side]])
+        np.array(
+            [
+                [*soles[a:b, side, :2].mean(axis=0), _mean_angle(soles[a:b, side, 2])]
+                for a, b in runs[side]
+            ]
+        )
         for side in (0, 1)
-    ]  # fmt: skip
+    ]
     poses = _rescale_footsteps(generated, runs, standing_feet, params.step_scale)
     feet = []
     for side in (0, 1):

@@ -170,10 +170,14 @@ def build_sim_model(params: SimulateParams, visual: bool = False) -> SimModel:
     )
     if visual:  # a checkered floor shows the walk's progress on video
         spec.add_texture(
-            name="grid", type=mujoco.mjtTexture.mjTEXTURE_2D,
+            name="grid",
+            type=mujoco.mjtTexture.mjTEXTURE_2D,
             builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER,
-            rgb1=[0.45, 0.5, 0.55], rgb2=[0.65, 0.7, 0.75], width=64, height=64,
-        )  # fmt: skip
+            rgb1=[0.45, 0.5, 0.55],
+            rgb2=[0.65, 0.7, 0.75],
+            width=64,
+            height=64,
+        )
         material = spec.add_material(name="grid", texrepeat=[4.0, 4.0], texuniform=True)
         material.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "grid"
         spec.geom("floor").material = "grid"

@@ -78,9 +78,16 @@ class OnlineReference:
         reference = np.array([self.guide.at(u)[0] for u in knots])
         reference[:, 2] = self.params.com_height
         problem = horizon_problem(
-            self.plan, self.nominal, t, self.mpc_params, com, com_velocity, angular_momentum,
-            reference, -SOLE_HEIGHT,
-        )  # fmt: skip
+            self.plan,
+            self.nominal,
+            t,
+            self.mpc_params,
+            com,
+            com_velocity,
+            angular_momentum,
+            reference,
+            -SOLE_HEIGHT,
+        )
         solution = self.mpc.solve(problem)
         self.problem, self.solution, self.solved_at = problem, solution, t
         self.solve_times.append(solution.solve_s)
@@ -89,8 +96,9 @@ class OnlineReference:
 
     def _adjust_footsteps(self, t: float, problem: MpcProblem, solution: MpcSolution) -> None:
         """Write each movable landing the MPC chose into the plan (the swing planner's target)."""
-        times = np.clip(t + np.arange(len(problem.landing[0])) * self.mpc_params.dt, 0.0,
-                        self.plan.duration)  # fmt: skip
+        times = np.clip(
+            t + np.arange(len(problem.landing[0])) * self.mpc_params.dt, 0.0, self.plan.duration
+        )
         for side in (0, 1):
             for k in np.flatnonzero(problem.landing[side]):
                 m = self.plan.stance_index(side, times[k])

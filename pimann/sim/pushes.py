@@ -61,9 +61,11 @@ def push_at_mid_single_support(
         raise ValueError("the plan never lifts a foot: no single support to push in")
     middle = 0.5 * (plan.feet[swing].t_off[0] + plan.feet[swing].t_on[1])
     heading = float(plan.feet[1 - swing].yaws[0])
-    local = np.array([1.0, 0.0, 0.0]) if direction == "forward" else np.array(
-        [0.0, 1.0 if swing == 0 else -1.0, 0.0]
-    )  # fmt: skip
+    local = (
+        np.array([1.0, 0.0, 0.0])
+        if direction == "forward"
+        else np.array([0.0, 1.0 if swing == 0 else -1.0, 0.0])
+    )
     return Push(force * (rot_z(heading) @ local), middle - 0.5 * duration, duration)
 
 
@@ -89,8 +91,13 @@ def push_recovery(
                 except PimannError as error:  # the MPC found no way to recover: a fall
                     log.debug("%s %s %.0f N: %s", controller, direction, force, error.problem)
                     return False
-                log.debug("%s %s %.0f N: %s", controller, direction, force,
-                          "fell" if result.fallen else "survived")  # fmt: skip
+                log.debug(
+                    "%s %s %.0f N: %s",
+                    controller,
+                    direction,
+                    force,
+                    "fell" if result.fallen else "survived",
+                )
                 return not result.fallen
 
             table[controller][direction] = largest_survived(
@@ -112,8 +119,7 @@ def plot_push_recovery(table: dict[str, dict[str, float]], path: str | Path) -> 
     width = 0.8 / max(len(controllers), 1)
     for k, controller in enumerate(controllers):
         x = np.arange(len(directions)) + (k - 0.5 * (len(controllers) - 1)) * width
-        axis.bar(x, [table[controller].get(d, np.nan) for d in directions], width,
-                 label=controller)  # fmt: skip
+        axis.bar(x, [table[controller].get(d, np.nan) for d in directions], width, label=controller)
     axis.set_xticks(np.arange(len(directions)), directions)
     axis.set_ylabel("largest push survived (N)")
     axis.legend(frameon=False)

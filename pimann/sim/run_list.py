@@ -72,17 +72,23 @@ def simulate_runs(
         path = rollout_path(rollouts_dir, key)
         if not path.is_file():
             raise PimannError(path, "rollout not found (run the rollout stage first)")
-        push_jobs.append((f"{key.model}-{key.seed}-{key.scenario}-"
-                          f"{STEERING_LABEL[key.steering]}", path))  # fmt: skip
+        push_jobs.append(
+            (f"{key.model}-{key.seed}-{key.scenario}-{STEERING_LABEL[key.steering]}", path)
+        )
     runs: dict[str, Any] = {}
     pushes: dict[str, Any] = {}
     with atomic_path(out_dir) as tmp:
         tmp.mkdir()
         for run, path in track(jobs, "simulate", "runs", logger=log):
             name = run_name(run)
-            provenance = {"model": run.model, "seed": run.seed, "scenario": run.scenario,
-                          "steering": run.steering, "controller": run.controller,
-                          "rollout": repo_relative(path)}  # fmt: skip
+            provenance = {
+                "model": run.model,
+                "seed": run.seed,
+                "scenario": run.scenario,
+                "steering": run.steering,
+                "controller": run.controller,
+                "rollout": repo_relative(path),
+            }
             try:
                 with about(path, f"simulate run {name}"):
                     trajectory = read_trajectory(path)
@@ -93,28 +99,42 @@ def simulate_runs(
                 runs[name] = {**provenance, "success": False, "failed": str(error)}
                 continue
             summary = write_simulation(
-                tmp / f"{name}.h5", result, sim, source=repo_relative(path),
-                rate_hz=sim.output_rate_hz, attrs=provenance,
-            )  # fmt: skip
+                tmp / f"{name}.h5",
+                result,
+                sim,
+                source=repo_relative(path),
+                rate_hz=sim.output_rate_hz,
+                attrs=provenance,
+            )
             log.debug(
                 "%s: success %s, %d steps, walked %.2f m of %.2f m, joint RMSE %.4f rad, ZMP "
-                "outside %.3f m, slip %.4f m, RTF %.1fx", name, summary["success"],
-                summary["steps"], summary["distance_walked_m"], summary["distance_planned_m"],
-                summary["joint_rmse_rad"], summary["zmp_outside_max_m"] or 0.0,
-                summary["foot_slip_m"], summary["real_time_factor"],
-            )  # fmt: skip
+                "outside %.3f m, slip %.4f m, RTF %.1fx",
+                name,
+                summary["success"],
+                summary["steps"],
+                summary["distance_walked_m"],
+                summary["distance_planned_m"],
+                summary["joint_rmse_rad"],
+                summary["zmp_outside_max_m"] or 0.0,
+                summary["foot_slip_m"],
+                summary["real_time_factor"],
+            )
             if run.video:
                 render_simulation(
-                    read_trajectory(tmp / f"{name}.h5"), tmp / f"{name}.mp4", sim,
-                    every_n_frames=sim.video_every_n, width=sim.video_width,
+                    read_trajectory(tmp / f"{name}.h5"),
+                    tmp / f"{name}.mp4",
+                    sim,
+                    every_n_frames=sim.video_every_n,
+                    width=sim.video_width,
                     height=sim.video_height,
-                )  # fmt: skip
+                )
             runs[name] = {**provenance, **summary}
         for name, path in track(push_jobs, "simulate", "push studies", logger=log):
             try:
                 with about(path, f"push recovery {name}"):
-                    pushes[name] = push_recovery(read_trajectory(path), sim,
-                                                 list(sim.pushes.controllers))  # fmt: skip
+                    pushes[name] = push_recovery(
+                        read_trajectory(path), sim, list(sim.pushes.controllers)
+                    )
             except PimannError as error:  # recorded, the other studies go on
                 log.warning("%s", error)
                 pushes[name] = {"failed": str(error)}
@@ -122,17 +142,34 @@ def simulate_runs(
         if tables:
             plot_push_recovery(next(iter(tables.values())), tmp / "pushes.png")
             for row in push_records(tables):
-                log.info("push recovery %s, %s, %s: %.0f N", row["rollout"], row["controller"],
-                         row["direction"], row["largest_survived_n"])  # fmt: skip
+                log.info(
+                    "push recovery %s, %s, %s: %.0f N",
+                    row["rollout"],
+                    row["controller"],
+                    row["direction"],
+                    row["largest_survived_n"],
+                )
     failed = sorted(name for name, run in runs.items() if "failed" in run)
     if failed:
         log.warning("%d of %d runs failed: %s", len(failed), len(runs), ", ".join(failed))
-    fell = [f"{name} at {run['fall_time_s']:.1f} s" for name, run in runs.items()
-            if run.get("fall_time_s") is not None]  # fmt: skip
-    log.info("%d of %d runs succeeded; fell: %s", sum(bool(run.get("success")) for run in
-             runs.values()), len(runs), ", ".join(fell) or "none")  # fmt: skip
-    record = {"profile": params.profile, "failed_runs": failed, "runs": runs,
-              "pushes": pushes, "params": {"simulate": as_dict(sim)}}  # fmt: skip
+    fell = [
+        f"{name} at {run['fall_time_s']:.1f} s"
+        for name, run in runs.items()
+        if run.get("fall_time_s") is not None
+    ]
+    log.info(
+        "%d of %d runs succeeded; fell: %s",
+        sum(bool(run.get("success")) for run in runs.values()),
+        len(runs),
+        ", ".join(fell) or "none",
+    )
+    record = {
+        "profile": params.profile,
+        "failed_runs": failed,
+        "runs": runs,
+        "pushes": pushes,
+        "params": {"simulate": as_dict(sim)},
+    }
     record = _json_ready(record)
     write_text_atomic(summary_path, json.dumps(record, indent=2) + "\n")
     return record

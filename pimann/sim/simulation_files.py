@@ -25,10 +25,20 @@ from pimann.sim.closed_loop import SimulationResult
 
 CONTACT_FORCE_N = 20.0  # N of normal force for a foot to count as in contact
 TRACES = (
-    "joints_reference", "joints_measured", "joints_generated", "com_reference", "com_measured",
-    "zmp_reference", "zmp_measured", "base_height", "ik_error", "soles_measured",
-    "soles_reference", "foot_forces", "zmp_outside_support",
-)  # fmt: skip
+    "joints_reference",
+    "joints_measured",
+    "joints_generated",
+    "com_reference",
+    "com_measured",
+    "zmp_reference",
+    "zmp_measured",
+    "base_height",
+    "ik_error",
+    "soles_measured",
+    "soles_reference",
+    "foot_forces",
+    "zmp_outside_support",
+)
 
 
 def _cross(a: np.ndarray, b: np.ndarray):

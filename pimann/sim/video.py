@@ -96,9 +96,14 @@ def render_simulation(
             log.warning("MuJoCo rendering unavailable (%s): stick figure instead", error)
     if renderer is None:
         return render_trajectory(
-            trajectory, output_path, fps=None, width=width, height=height,
-            every_n_frames=every_n_frames, strip_frames=strip_frames,
-        )  # fmt: skip
+            trajectory,
+            output_path,
+            fps=None,
+            width=width,
+            height=height,
+            every_n_frames=every_n_frames,
+            strip_frames=strip_frames,
+        )
     clock = np.asarray(trajectory.time, dtype=float)
     if suffix == ".png":
         frames = strip_frame_indices(len(clock), strip_frames)
