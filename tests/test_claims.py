@@ -13,7 +13,6 @@ from builders import AGREEING, REFERENCE, crafted_metrics
 from pimann.core.params import load_params
 from pimann.core.rollout_files import BASELINE
 from pimann.evaluate.claims import (
-    CONFIGURATION_HELD,
     FAILS,
     HOLDS,
     NOT_COMPARABLE,
@@ -24,6 +23,7 @@ from pimann.evaluate.claims import (
     data_claim,
     evaluate_claims,
 )
+from pimann.learn.pi_gradient import holds_configuration
 
 ALL = [f"C{k}" for k in range(1, 15)]
 
@@ -217,14 +217,24 @@ def test_foot_pitch_claim_names_the_weights_that_stand(params):
 def test_foot_pitch_claim_names_a_held_configuration(params, pi_gradient):
     """A failing C9 says when train.pi_gradient keeps L_B's gradient off the configuration:
     exactly the values whose training loss detaches the predicted joints."""
-    from pimann.learn.training_loss import _HELD
-
     values = {k: dict(v) for k, v in AGREEING.items()}
     values["contact_sole_pitch_max_abs"].update(w100=0.01)
     claims = evaluate_claims(crafted_metrics(values), params.evaluate, pi_gradient=pi_gradient)
     (c9,) = [c for c in claims if c.id == "C9"]
     named = f"train.pi_gradient {pi_gradient} holds the configuration" in c9.reason
-    assert named == ("joints" in _HELD[pi_gradient]) == (pi_gradient in CONFIGURATION_HELD)
+    assert (
+        named == holds_configuration(pi_gradient) == (pi_gradient in ("base", "joint_velocities"))
+    )
+
+
+def test_every_pi_gradient_value_says_what_it_holds():
+    import typing
+
+    from pimann.core.params import TrainParams
+    from pimann.learn.pi_gradient import HELD_PREDICTIONS
+
+    values = typing.get_args(typing.get_type_hints(TrainParams)["pi_gradient"])
+    assert set(values) == set(HELD_PREDICTIONS)
 
 
 def test_c5_names_a_reduction_that_comes_without_the_physics_term(params):

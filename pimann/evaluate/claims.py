@@ -36,6 +36,7 @@ from pimann.core.rollout_files import (
 )
 from pimann.evaluate.data_reference import reference_value
 from pimann.evaluate.metrics import PAPER_BASELINE_RMSE, WALK_TOUCHDOWNS
+from pimann.learn.pi_gradient import holds_configuration
 
 __all__ = [
     "C1_FACTOR",
@@ -173,15 +174,9 @@ def stricter_beside(data: SeedData, weights: Sequence[float]) -> str:
     )
 
 
-# train.pi_gradient values that hold the predicted configuration out of L_B's gradient
-# (pimann.learn.training_loss, a torch module the claims do not import; a test ties the two), the
-# way by which a large w tips the support foot onto its heel
-CONFIGURATION_HELD = ("base", "joint_velocities")
-
-
 def configuration_held_cause(pi_gradient: str) -> str:
     """C9's cause when `pi_gradient` keeps L_B from tipping the feet ('' when it does not)."""
-    if pi_gradient not in CONFIGURATION_HELD:
+    if not holds_configuration(pi_gradient):
         return ""
     return (
         f"; train.pi_gradient {pi_gradient} holds the configuration out of L_B's gradient, "

@@ -189,16 +189,16 @@ def train_models(
     progress = f"train {out_dir.name} seeds {groups[0]}"
     jobs = [
         _GroupJob(
-            dataset_path,
-            group,
-            pi_weight,
-            params,
-            str(device),
-            checkpoint_dir,
-            stop_after,
-            max(1, threads // workers),
-            precision,
-            progress if k == 0 else None,
+            dataset_path=dataset_path,
+            seeds=group,
+            pi_weight=pi_weight,
+            params=params,
+            device=str(device),
+            checkpoint_dir=checkpoint_dir,
+            stop_after=stop_after,
+            threads=max(1, threads // workers),
+            precision=precision,
+            progress=progress if k == 0 else None,
         )
         for k, group in enumerate(groups)
     ]
@@ -288,13 +288,13 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
         fingerprint = _fingerprint(job.dataset_path, pi_weight, seeds, job.params)
         members = len(seeds)
         state = _State(
-            0,
-            {},
-            {},
-            {k: v.detach().clone() for k, v in model.state_dict().items()},
-            [math.inf] * members,
-            [-1] * members,
-            [[] for _ in seeds],
+            epoch=0,
+            model={},
+            optimizer={},
+            best={k: v.detach().clone() for k, v in model.state_dict().items()},
+            best_loss=[math.inf] * members,
+            best_epoch=[-1] * members,
+            history=[[] for _ in seeds],
         )
         if checkpoint.is_file():
             saved = torch.load(checkpoint, map_location=device, weights_only=True)

@@ -17,20 +17,7 @@ from pimann.core.params import TrainParams
 from pimann.core.robot import load_robot
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.physics_loss import PhysicsInformedLoss
-
-# per `train.pi_gradient`: the predictions L_B's gradient does not move
-_HELD = {
-    "both": (),
-    "joints": ("base_linear_velocity", "base_angular_velocity"),
-    "base": ("base_position", "base_rpy", "joints", "joint_velocities"),
-    "joint_velocities": (
-        "base_linear_velocity",
-        "base_angular_velocity",
-        "base_position",
-        "base_rpy",
-        "joints",
-    ),
-}
+from pimann.learn.pi_gradient import HELD_PREDICTIONS
 
 
 class LossTerms(NamedTuple):
@@ -58,7 +45,7 @@ class TrainingLoss(torch.nn.Module):
     ):
         super().__init__()
         self.layout, self.pi_configuration = layout, pi_configuration
-        self.held = _HELD[pi_gradient]
+        self.held = HELD_PREDICTIONS[pi_gradient]
         self.register_buffer("y_mean", torch.as_tensor(stats.y_mean, dtype=torch.float32))
         self.register_buffer("y_std", torch.as_tensor(stats.y_std, dtype=torch.float32))
         self.physics = PhysicsInformedLoss(load_robot("retarget"), torch.float32, device)
