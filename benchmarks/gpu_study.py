@@ -133,28 +133,30 @@ def synthetic_dataset(path: Path, params: Params, clips: int = 6, frames: int = 
     return path
 
 
+def whole_data_run(
+    params: Params, epochs: int, precision: str, device: torch.device, **train: object
+) -> Params:
+    """`params` training on every sample for `epochs`, at `precision` on `device`."""
+    changes = dict(epochs=epochs, max_train_samples=None, precision=precision)
+    whole = dataclasses.replace(params.train, **changes, device=device.type, **train)
+    return dataclasses.replace(params, train=whole)
+
+
 def largest_training(
     params: Params,
     dataset: Path,
+    samples: int,
     step_s: float,
     budget_s: float,
     device: torch.device,
     precision: str,
     out: Path,
 ) -> None:
-    """Train the 5 seeds on every sample of `dataset` for the epochs that fit `budget_s`."""
-    samples = len(read_dataset(dataset).x_train)
+    """Train the 5 seeds on the `samples` of `dataset` for the epochs that fit `budget_s`."""
     epoch_s = math.ceil(samples / params.train.batch_size) * step_s
     # the test loss, the checkpoint and the start take their share: plan on 70% for steps
     epochs = max(1, min(params.train.epochs, int(0.7 * budget_s / epoch_s)))
-    train = dataclasses.replace(
-        params.train,
-        epochs=epochs,
-        max_train_samples=None,
-        precision=precision,
-        device=device.type,
-    )
-    run = dataclasses.replace(params, train=train)
+    run = whole_data_run(params, epochs, precision, device)
     print(
         f"training that fits {budget_s:.0f} s: 5 seeds, w={PI_WEIGHT:g}, {samples} samples, "
         f"{epochs} epochs ({epochs * epoch_s:.1f} s of steps projected), {precision}"
@@ -169,6 +171,7 @@ def largest_training(
 def sweep_epochs(
     params: Params,
     dataset: Path,
+    samples: int,
     step_s: float,
     budget_s: float,
     device: torch.device,
@@ -176,21 +179,12 @@ def sweep_epochs(
 ) -> None:
     """The stages' sweep, eager and (on CUDA) graphed, each for the epochs that fit half of
     `budget_s`; wall seconds an epoch and the paper-size sweep projected from them."""
-    samples = len(read_dataset(dataset).x_train)
     weights = list(params.train.pi_weights)
     members = len(weights) * len(SEEDS)
     steps = math.ceil(samples / params.train.batch_size)
     estimate = steps * step_s * members / len(SEEDS)  # eager: the 5-seed step, scaled
     epochs = max(1, min(params.train.epochs, int(0.35 * budget_s / estimate)))
-    train = dataclasses.replace(
-        params.train,
-        epochs=epochs,
-        max_train_samples=None,
-        precision=precision,
-        device=device.type,
-        seeds=SEEDS,
-    )
-    run = dataclasses.replace(params, train=train)
+    run = whole_data_run(params, epochs, precision, device, seeds=SEEDS)
     modes = [False] + ([True] if device.type == "cuda" else [])
     print(
         f"the sweep as the stages train it: {members} models (w {weights} x seeds {SEEDS}), "
@@ -263,8 +257,10 @@ def main(argv: list[str] | None = None) -> int:
         if dataset is None:
             dataset = synthetic_dataset(out / "full.h5", params, 3 if args.smoke else 6)
             print(f"  (synthetic dataset: no features given, {default} absent or --smoke)")
-        largest_training(params, dataset, times[fastest][0], budget, device, fastest, out)
-        sweep_epochs(params, dataset, times[fastest][0], budget, device, fastest)
+        samples = len(read_dataset(dataset).x_train)
+        step_s = times[fastest][0]
+        largest_training(params, dataset, samples, step_s, budget, device, fastest, out)
+        sweep_epochs(params, dataset, samples, step_s, budget, device, fastest)
     return 0
 
 

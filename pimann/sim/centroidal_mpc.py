@@ -117,8 +117,6 @@ QP_OPTIONS = {
         "warm_start_dual": True,
     },
     "piqp": {},
-    "proxqp": {"proxqp": {"eps_abs": 1e-7}, "warm_start_primal": True, "warm_start_dual": True},
-    "qrqp": {"print_iter": False, "print_header": False},
 }
 
 
@@ -158,21 +156,21 @@ class SequentialQp:
         self.pack = ca.Function("pack", variables, [x])
         self.unpack = ca.Function("unpack", [x], variables)
         sparsity = {"h": self.data.sparsity_out(0), "a": self.data.sparsity_out(2)}
-        merged = {"error_on_fail": False, **QP_OPTIONS.get(qp_solver, {}), **options}
+        merged = {"error_on_fail": False, **QP_OPTIONS[qp_solver], **options}
         self.qp = ca.conic("mpc_qp", qp_solver, sparsity, merged)
         self.name = qp_solver
         self.warm_iterations, self.cold_iterations, self.tolerance = iterations, 20, 1e-6
 
     def solve(
         self, parameters: list, guess: list[np.ndarray], multipliers: np.ndarray | None
-    ) -> tuple[list[np.ndarray], np.ndarray, int]:
-        """(variables, the last QP's multipliers, iterations) from `guess`; raises PimannError
-        when a QP fails."""
+    ) -> tuple[list[np.ndarray], np.ndarray]:
+        """(variables, the last QP's multipliers) from `guess`; raises PimannError when a QP
+        fails."""
         p = self.pack_parameters(*parameters)
         x = self.pack(*guess)
         lam = ca.DM.zeros(self.data.size1_out(2)) if multipliers is None else multipliers
         iterations = self.cold_iterations if multipliers is None else self.warm_iterations
-        for iteration in range(1, iterations + 1):  # noqa: B007 (returned)
+        for _ in range(iterations):
             h, g, a, lba, uba = self.data(p, x)
             out = self.qp(h=h, g=g, a=a, lba=lba, uba=uba, x0=x, lam_a0=lam)
             if not self.qp.stats().get("success", False):
@@ -182,7 +180,7 @@ class SequentialQp:
             x, lam = out["x"], out["lam_a"]
             if step < self.tolerance:
                 break
-        return [np.asarray(v) for v in self.unpack(x)], np.asarray(lam), iteration
+        return [np.asarray(v) for v in self.unpack(x)], np.asarray(lam)
 
 
 # the stage vectors: state x_k = [c, cdot, L, left sole, right sole, the previous interval's
@@ -459,7 +457,7 @@ class CentroidalMPC:
             *values, multipliers = self.previous
             guess = self._shifted(values)
         try:
-            values, multipliers, _ = self.sqp.solve(inputs, guess, multipliers)
+            values, multipliers = self.sqp.solve(inputs, guess, multipliers)
         except PimannError:
             if self.previous is None:
                 raise
