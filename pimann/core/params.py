@@ -10,9 +10,6 @@ Types are strict where YAML could mislead: an int is not a bool, a string is not
 every float is finite (an int is taken as a float). Ranges are field constraints (`Positive`,
 `Field(ge=1)`, ...); names used in one place that must exist in another are checked by the
 validators of `MpcParams` and `Params`.
-
-Over 400 lines: one typed section per stage of params.yaml and the loader that words its
-errors; one schema, which split by section would scatter the cross-section checks.
 """
 
 from __future__ import annotations
