@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 
 import pytest
+import yaml
 
 from pimann.core.errors import PimannError
 from pimann.core.parallel import (
@@ -49,14 +50,14 @@ def test_threads_from_the_environment_the_setting_or_the_free_cores(monkeypatch)
 
 
 def test_params_name_a_bad_precision_or_thread_count(tmp_path):
-    text = (load_params.__globals__["DEFAULT_PARAMS"]).read_text()
-    assert "  precision: float32\n" in text and "  threads: auto\n" in text
-    for old, new, problem in (
-        ("  precision: float32\n", "  precision: half\n", "train.precision must be one of"),
-        ("  threads: auto\n", "  threads: 0\n", "train.threads"),
+    raw = yaml.safe_load(load_params.__globals__["DEFAULT_PARAMS"].read_text())
+    for key, value, problem in (
+        ("precision", "half", "train.precision must be one of"),
+        ("threads", 0, "train.threads"),
     ):
+        changed = {**raw, "train": {**raw["train"], key: value}}
         path = tmp_path / "params.yaml"
-        path.write_text(text.replace(old, new))
+        path.write_text(yaml.safe_dump(changed))
         with pytest.raises(PimannError, match=problem) as error:
             load_params(path)
         assert str(path) in str(error.value)
