@@ -34,65 +34,36 @@ _SIDE_WORDS = {"{Left}": SIDES, "{L}": ("L", "R"), "{l}": ("l", "r")}
 # alternatives (the first the file has wins), {Left} {L} {l} standing for the side.
 CONVENTIONS: dict[str, dict[str, str]] = {
     "bandai_namco": {
-        "Pelvis": "Hips",
-        "T8": "Chest",
-        "Head": "Head",
-        "UpperLeg": "UpperLeg_{L}",
-        "LowerLeg": "LowerLeg_{L}",
-        "Foot": "Foot_{L}",
-        "Toes": "Toes_{L}",
-        "UpperArm": "UpperArm_{L}",
-        "ForeArm": "LowerArm_{L}",
+        "Pelvis": "Hips", "T8": "Chest", "Head": "Head",
+        "UpperLeg": "UpperLeg_{L}", "LowerLeg": "LowerLeg_{L}", "Foot": "Foot_{L}",
+        "Toes": "Toes_{L}", "UpperArm": "UpperArm_{L}", "ForeArm": "LowerArm_{L}",
     },
     # Blender rigs (ReActIdle; Rigify DEF- bones): the shoulders hang from spine.001 (the
     # chest) in ReActIdle, spine.003 in Rigify; `face` ends the neck chain and turns with it.
     "blender_rigify": {
-        "Pelvis": "pelvis|spine",
-        "T8": "spine.003|spine.001",
-        "Head": "face|spine.006|head",
-        "UpperLeg": "thigh.{L}",
-        "LowerLeg": "shin.{L}",
-        "Foot": "foot.{L}",
-        "Toes": "toe.{L}",
-        "UpperArm": "upper_arm.{L}",
-        "ForeArm": "forearm.{L}",
+        "Pelvis": "pelvis|spine", "T8": "spine.003|spine.001", "Head": "face|spine.006|head",
+        "UpperLeg": "thigh.{L}", "LowerLeg": "shin.{L}", "Foot": "foot.{L}",
+        "Toes": "toe.{L}", "UpperArm": "upper_arm.{L}", "ForeArm": "forearm.{L}",
     },
     # Unity humanoid and Mixamo: T8 is the bone the shoulders hang from.
     "unity_mixamo": {
-        "Pelvis": "Hips",
-        "T8": "UpperChest|Spine2|Chest|Spine1",
-        "Head": "Head",
-        "UpperLeg": "{Left}UpperLeg|{Left}UpLeg",
-        "LowerLeg": "{Left}LowerLeg|{Left}Leg",
-        "Foot": "{Left}Foot",
-        "Toes": "{Left}Toes|{Left}ToeBase",
-        "UpperArm": "{Left}UpperArm|{Left}Arm",
-        "ForeArm": "{Left}LowerArm|{Left}ForeArm",
+        "Pelvis": "Hips", "T8": "UpperChest|Spine2|Chest|Spine1", "Head": "Head",
+        "UpperLeg": "{Left}UpperLeg|{Left}UpLeg", "LowerLeg": "{Left}LowerLeg|{Left}Leg",
+        "Foot": "{Left}Foot", "Toes": "{Left}Toes|{Left}ToeBase",
+        "UpperArm": "{Left}UpperArm|{Left}Arm", "ForeArm": "{Left}LowerArm|{Left}ForeArm",
     },
     # XSens MVN export: Chest..Chest4 are L5, L3, T12, T8; Shoulder is the upper arm.
     "xsens_mvn": {
-        "Pelvis": "Hips",
-        "T8": "Chest4|Spine3",
-        "Head": "Head",
-        "UpperLeg": "{Left}Hip",
-        "LowerLeg": "{Left}Knee",
-        "Foot": "{Left}Ankle",
-        "Toes": "{Left}Toe",
-        "UpperArm": "{Left}Shoulder",
-        "ForeArm": "{Left}Elbow",
+        "Pelvis": "Hips", "T8": "Chest4|Spine3", "Head": "Head",
+        "UpperLeg": "{Left}Hip", "LowerLeg": "{Left}Knee", "Foot": "{Left}Ankle",
+        "Toes": "{Left}Toe", "UpperArm": "{Left}Shoulder", "ForeArm": "{Left}Elbow",
     },
     "cmu": {
-        "Pelvis": "hip",
-        "T8": "chest",
-        "Head": "head",
-        "UpperLeg": "{l}Thigh",
-        "LowerLeg": "{l}Shin",
-        "Foot": "{l}Foot",
-        "Toes": "{l}Toe",
-        "UpperArm": "{l}Shldr",
-        "ForeArm": "{l}ForeArm",
+        "Pelvis": "hip", "T8": "chest", "Head": "head",
+        "UpperLeg": "{l}Thigh", "LowerLeg": "{l}Shin", "Foot": "{l}Foot",
+        "Toes": "{l}Toe", "UpperArm": "{l}Shldr", "ForeArm": "{l}ForeArm",
     },
-}
+}  # fmt: skip
 _PREFIX = re.compile(r"^(?:.*:|DEF-)")  # Maya/FBX namespaces (mixamorig:), Rigify DEF-
 
 

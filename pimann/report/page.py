@@ -39,13 +39,10 @@ MEDIA_TYPES = {".png": "image/png", ".gif": "image/gif", ".mp4": "video/mp4"}
 VIDEO_SUFFIXES = (".mp4", ".gif")
 HEADLINE_FIGURES = ("pi_weight_comparison", "base_displacement")  # sliding by w; drift, steering
 CLAIM_MARKS = {  # claims.md status: (mark, CSS class)
-    "holds": ("\u2714", "holds"),
-    "holds within seed spread": ("\u2248", "spread"),
-    "holds (model stands still)": ("\u25d0", "still"),
-    "does not hold": ("\u2718", "fails"),
-    "not comparable": ("\u2013", "na"),
-    "reference": ("\u25cf", "reference"),
-}
+    "holds": ("\u2714", "holds"), "holds within seed spread": ("\u2248", "spread"),
+    "holds (model stands still)": ("\u25d0", "still"), "does not hold": ("\u2718", "fails"),
+    "not comparable": ("\u2013", "na"), "reference": ("\u25cf", "reference"),
+}  # fmt: skip
 SIM_COLUMNS = (  # sim_summary.json run fields shown in the simulation table
     "model",
     "seed",
