@@ -62,6 +62,10 @@ EVALUATE_PARAMS = EvaluateParams(
     skating_rate_hz=20.0,
     walk_distance=1.0,
     foot_velocity_frame="local_world_aligned",
+    gait_window_s=8.0,
+    glide_height=0.03,
+    glide_speed=0.2,
+    gait_speed_band=0.1,
 )
 
 

@@ -251,6 +251,19 @@ class ProtocolParams:
 
 
 @dataclass(frozen=True, config=CONFIG)
+class ConsistentParams:
+    """rollout.consistent: contact-consistent rollouts, written beside the raw ones: a foot in
+    contact (the study's contact rule) is held at its touchdown pose and the legs re-solved."""
+
+    variants: list[Literal["post", "loop"]]  # post: a finished rollout; loop: fed back; []: none
+    scenarios: list[Str]  # the scenarios and protocols given such variants
+    blend_s: NonNegative  # s over which a touchdown or a lift-off blends held and raw sole
+    iterations: Count  # leg IK iterations a frame
+    damping: NonNegative  # the leg IK's damping (least squares)
+    tolerance: Positive  # m, the held sole's largest allowed distance from its touchdown pose
+
+
+@dataclass(frozen=True, config=CONFIG)
 class RolloutParams:
     """rollout: autoregressive generation and steering (paper Sec. III-C)."""
 
@@ -273,6 +286,10 @@ class RolloutParams:
     benchmark_train_clips: NonNegativeInt
     # the authors' test protocols, rolled out as scenarios of their own name (rollout_files)
     protocols: dict[Str, ProtocolParams]
+    # ADHERENT's past base velocities: twist (its own generator feeds back the predicted
+    # SE(2) twist) | zeros (BLF's MANNAutoregressive pushes zeros)
+    adherent_past_velocity: Literal["twist", "zeros"]
+    consistent: ConsistentParams  # contact-consistent variants beside the raw rollouts
 
     @model_validator(mode="after")
     def _protocols(self) -> RolloutParams:
@@ -338,6 +355,10 @@ class EvaluateParams:
     skating_rate_hz: Positive  # ... at this frame rate
     walk_distance: Positive  # m, forward base travel that counts as walking
     foot_velocity_frame: Literal["local_world_aligned", "world"]  # sole velocities for the RMSE
+    gait_window_s: Positive  # s at a rollout's end over which travel, speed and cadence count
+    glide_height: Positive  # m, a sole's lowest corner below this ...
+    glide_speed: Positive  # m/s, ... moving horizontally faster than this is gliding
+    gait_speed_band: Positive  # m/s, the data's gait level at a speed: its walking within this
 
 
 @dataclass(frozen=True, config=CONFIG)
@@ -350,6 +371,7 @@ class SimulateRun:
     steering: Bool
     video: Bool  # also render this run to results/sim/<name>.mp4
     controller: Literal["offline", "online"] = "offline"  # DCM plan + QP, or the centroidal MPC
+    variant: Literal["raw", "post", "loop"] = "raw"  # the rollout, or a contact-consistent one
 
 
 @dataclass(frozen=True, config=CONFIG)
