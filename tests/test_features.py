@@ -55,7 +55,7 @@ def test_layout_sizes_and_windows(params):
         window_layout(dataclasses.replace(params.features, window="nope"), RATE, "full")
 
 
-def test_the_gait_phase_adds_two_fed_back_columns_after_the_pose(params):
+def test_the_gait_phase_adds_two_columns_after_the_pose(params):
     plain = window_layout(params.features, RATE, "full")
     phased = window_layout(
         dataclasses.replace(params.features, gait_phase=True, gait_phase_step_s=0.8), RATE, "full"
@@ -63,8 +63,7 @@ def test_the_gait_phase_adds_two_fed_back_columns_after_the_pose(params):
     assert (phased.input_dim, phased.output_dim) == (plain.input_dim + 2, plain.output_dim + 2)
     assert phased.names("x")[-2:] == ["gait_phase.cos", "gait_phase.sin"]
     assert phased.names("y")[:-2] == plain.names("y")
-    fed = phased.fed_back_columns()
-    assert fed[-2:].all() and np.array_equal(fed[:-2], plain.fed_back_columns())
+    assert phased.names("x")[:-2] == plain.names("x")
     assert FeatureLayout.from_json(phased.to_json()) == phased
     assert "gait_phase" not in plain.to_json()  # layouts without it read as before
     with pytest.raises(PimannError, match="gait_phase_step_s"):

@@ -214,20 +214,6 @@ def test_pi_dropout_false_takes_l_b_without_dropout(tmp_path, params, dataset_pa
     assert not torch.equal(a["expert_weight_2"], c["expert_weight_2"])
 
 
-def test_fed_back_columns_are_the_past_window_joints_and_joint_velocities(dataset_path):
-    from pimann.learn.dataset import read_dataset
-
-    layout = read_dataset(dataset_path).layout
-    mask = layout.fed_back_columns()
-    names = np.array(layout.names("x"))
-    fed = {name.split("[")[0].split(".")[0] for name in names[mask]}
-    assert fed == {"base_linear_window", "base_angular_window", "joints", "joint_velocities"}
-    for name, on in zip(names, mask, strict=True):
-        if "_window[" in name:  # e.g. base_linear_window[-50].x: offsets in frames
-            assert on == (int(name.split("[")[1].split("]")[0]) <= 0), name
-    assert not mask[layout.x_slices["base_rpy"]].any()
-
-
 def test_bf16_training_is_deterministic_and_recorded(tmp_path, params, dataset_path):
     """Two bf16 trainings of one seed give identical weights, not float32's, and say bf16."""
     runs = {}

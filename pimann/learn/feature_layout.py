@@ -87,24 +87,6 @@ class FeatureLayout:
         own earlier predictions, the later ones from the command."""
         return [offset for offset in self.input_offsets if offset <= 0]
 
-    def fed_back_columns(self) -> np.ndarray:
-        """(input_dim,) bool: the input a rollout fills from its own earlier predictions (the
-        velocity window up to now, the joints and their velocities, the gait phase), not from
-        the command."""
-        mask = np.zeros(self.input_dim, dtype=bool)
-        slices = self.x_slices
-        past = np.repeat(np.isin(self.input_offsets, self.past_input_offsets()), 3)
-        for block in ("base_linear_window", "base_angular_window"):
-            mask[slices[block]] = past
-        for block in self.fed_back_state():
-            mask[slices[block]] = True
-        return mask
-
-    def fed_back_state(self) -> tuple[str, ...]:
-        """The state blocks a rollout feeds back from y_{i-1} into x_i as they are (the pose
-        has its own rule, `rollout.pose_feedback`)."""
-        return ("joints", "joint_velocities") + (("gait_phase",) if self.gait_phase else ())
-
     @property
     def input_dim(self) -> int:
         return next(reversed(self.x_slices.values())).stop
