@@ -142,7 +142,8 @@ def _capture(steps: list[_Step], generators: list[torch.Generator]) -> list[Call
     the epoch's reseeding (manual_seed) only sets host values that the prologue then copies.
     One generator for the whole ensemble would make it 2 launches but draw other masks than
     pimann.learn.train's per-seed generators; masks hashed on the device from per-member seed
-    tensors and a step counter would need none, with the same cost to the CPU's trainer.
+    tensors and a step counter would need no generator, but the CPU's trainer would have to
+    draw its masks the same way, which changes its models.
     """
     model, optimizer = steps[0].model, steps[0].optimizer
     weights = [p.detach().clone() for p in model.parameters()]
