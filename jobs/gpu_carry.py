@@ -90,7 +90,8 @@ def _inputs(
     robots = shared / "robots"
     files += [(p, f"{SHARED}/{p.relative_to(shared)}") for p in sorted(robots.rglob("*"))]
     if wheels is not None:
-        files += [(p, f"{WHEELS}/{p.name}") for p in sorted(wheels.glob("*.whl"))]
+        kept = [p for p in sorted(wheels.glob("*.whl")) if not p.name.startswith("numpy-")]
+        files += [(p, f"{WHEELS}/{p.name}") for p in kept]  # the device's numpy stays
     missing = [str(here) for here, _ in files if not here.exists()]
     if missing:
         raise SystemExit(f"missing: {', '.join(missing)} (dvc repro -s retarget features first)")
@@ -231,7 +232,10 @@ def stage_commands(root: Path) -> list[tuple[str, str]]:
 
 def _device_env(root: Path) -> dict[str, str]:
     env = dict(os.environ, PIMANN_SHARED=str(root / SHARED))
-    paths = [str(root)] + ([SITE] if Path(SITE).is_dir() else [])
+    # cmeel's wheels (pinocchio's) put their modules in cmeel.prefix/, which a .pth file
+    # names; PYTHONPATH's folders read no .pth file, so that folder is named here
+    prefix = sorted(str(p) for p in Path(SITE).glob("cmeel.prefix/lib/python*/site-packages"))
+    paths = [str(root)] + ([SITE] if Path(SITE).is_dir() else []) + prefix
     env["PYTHONPATH"] = os.pathsep.join(paths + [env.get("PYTHONPATH", "")]).rstrip(os.pathsep)
     return env
 
