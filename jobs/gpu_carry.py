@@ -59,6 +59,7 @@ MARGIN = 2 * 2**20
 
 
 def _sha256(path: Path) -> str:
+    """The file's sha256: each piece and params.yaml are checked on arrival."""
     digest = hashlib.sha256()
     with path.open("rb") as file:
         for block in iter(lambda: file.read(2**20), b""):
@@ -67,6 +68,7 @@ def _sha256(path: Path) -> str:
 
 
 def _raw_params(root: Path) -> dict:
+    """params.yaml as written: DVC renders its commands from these values, not a profile's."""
     return yaml.safe_load((root / "params.yaml").read_text())
 
 
@@ -99,10 +101,12 @@ def _inputs(
 
 
 def _variants() -> tuple[str, ...]:
+    """The features files the training stages read."""
     return ("full", "ground_projected")  # train@<w>'s and train_baseline's features
 
 
 def _features_dir(root: Path) -> str:
+    """features.output_dir, relative to the checkout here and there."""
     return str(_raw_params(root)["features"]["output_dir"]).rstrip("/")
 
 
@@ -121,6 +125,7 @@ def _split(blob: Path, folder: Path, size: int, stem: str) -> list[dict]:
 
 
 def _tar(files: list[tuple[Path, str]], out: Path) -> None:
+    """One gzip'd tar of `files` under their paths in the other checkout."""
     with tarfile.open(out, "w:gz", compresslevel=6) as tar:
         for here, there in files:
             tar.add(here, arcname=there, recursive=False)
@@ -142,6 +147,7 @@ def _join(folder: Path, manifest: dict) -> Path:
 
 
 def _extract(archive: Path, root: Path) -> list[str]:
+    """The archive into the checkout (tarfile's data filter: no path out of it)."""
     with tarfile.open(archive, "r:gz") as tar:
         names = tar.getnames()
         tar.extractall(root, filter="data")
@@ -231,6 +237,7 @@ def stage_commands(root: Path) -> list[tuple[str, str]]:
 
 
 def _device_env(root: Path) -> dict[str, str]:
+    """The stages' environment there: this checkout's pimann, the carried robot and wheels."""
     env = dict(os.environ, PIMANN_SHARED=str(root / SHARED))
     # cmeel's wheels (pinocchio's) put their modules in cmeel.prefix/, which a .pth file
     # names; PYTHONPATH's folders read no .pth file, so that folder is named here

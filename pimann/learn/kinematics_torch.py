@@ -176,6 +176,7 @@ class TorchKinematics(nn.Module):
             self.register_buffer(name, tensor, persistent=False)
 
     def _graph_safe(self, tensor: torch.Tensor) -> bool:
+        """Whether to take the constant-matrix products: `graph_safe`, else on CUDA tensors."""
         return tensor.is_cuda if self.graph_safe is None else self.graph_safe
 
     def gather(self, values: torch.Tensor) -> torch.Tensor:
