@@ -59,7 +59,10 @@ def test_only_leg_joints_move_the_soles(kinematics):
     assert leg == set(range(12))
 
 
-def test_autograd_matches_finite_differences(robot, kinematics, rng):
+@pytest.mark.parametrize("graph_safe", [False, True])
+def test_autograd_matches_finite_differences(robot, rng, graph_safe):
+    """Both paths: cumsum and scatter_add, and CUDA's products with constant matrices."""
+    kinematics = TorchKinematics(robot, graph_safe=graph_safe)
     position, rpy, joints = (torch.tensor(a) for a in random_states(robot, rng, 3))
 
     def scalar(joint_values: torch.Tensor) -> torch.Tensor:
@@ -85,10 +88,11 @@ def test_autograd_matches_finite_differences(robot, kinematics, rng):
     np.testing.assert_allclose(gradient, numeric, atol=1e-7)
 
 
-def test_other_frames_with_padding_and_gather(robot, rng):
+@pytest.mark.parametrize("graph_safe", [False, True])
+def test_other_frames_with_padding_and_gather(robot, rng, graph_safe):
     """Chains of different depths (padding) and out-of-order joints (the torso) still match."""
     frames = ("data_LeftLowerLeg", "data_T8", RIGHT_SOLE)
-    kinematics = TorchKinematics(robot, frames=frames)
+    kinematics = TorchKinematics(robot, frames=frames, graph_safe=graph_safe)
     assert kinematics._slice is None  # torso_roll precedes torso_pitch along the chain
     position, rpy, joints = random_states(robot, rng, 4)
     rotation = np.stack([pin.rpy.rpyToMatrix(a) for a in rpy])
@@ -101,3 +105,34 @@ def test_other_frames_with_padding_and_gather(robot, rng):
             np.testing.assert_allclose(out[frame].rotation[b], placement.rotation, atol=1e-8)
             jacobian = robot.frame_jacobian(q, frame, pin.LOCAL)
             np.testing.assert_allclose(out[frame].jacobian[b], jacobian, atol=1e-8)
+
+
+def test_the_graph_safe_path_gives_the_cpu_path(robot, kinematics, rng):
+    """CUDA's constant-matrix products (forced on the CPU) against cumsum and scatter_add:
+    the same placements and Jacobians to rounding, the Jacobian's zero columns exactly zero."""
+    safe = TorchKinematics(robot, graph_safe=True)
+    position, rpy, joints = (torch.tensor(a) for a in random_states(robot, rng, 32))
+    rotation = rpy_to_matrix(rpy)
+    plain, products = kinematics(position, rotation, joints), safe(position, rotation, joints)
+    for frame, reference in plain.items():
+        for mine, theirs in zip(products[frame], reference, strict=True):
+            torch.testing.assert_close(mine, theirs, rtol=0, atol=1e-14)
+        assert torch.equal(products[frame].jacobian[..., 6 + 12 :] == 0, torch.ones(32, 6, 14) > 0)
+    float_safe = TorchKinematics(robot, torch.float32, graph_safe=True)
+    out = float_safe(position.float(), rotation.float(), joints.float())[LEFT_SOLE]
+    torch.testing.assert_close(out.jacobian, plain[LEFT_SOLE].jacobian.float(), atol=1e-5, rtol=0)
+
+
+def test_the_gather_of_unordered_chains_is_index_select(robot, rng):
+    """The selection-matrix gather (capture-safe) against index_select, values and gradients."""
+    kinematics = TorchKinematics(robot, frames=("data_T8", "data_LeftLowerLeg"))
+    assert kinematics._slice is None
+    joints = torch.tensor(rng.normal(size=(5, 26)), requires_grad=True)
+    mine = kinematics.gather(joints)
+    reference = joints.index_select(-1, kinematics.index_flat).unflatten(-1, mine.shape[-2:])
+    assert torch.equal(mine, reference)
+    upstream = torch.tensor(rng.normal(size=mine.shape))
+    (grad_mine,) = torch.autograd.grad((mine * upstream).sum(), joints)
+    (grad_ref,) = torch.autograd.grad((reference * upstream).sum(), joints)
+    torch.testing.assert_close(grad_mine, grad_ref, rtol=0, atol=1e-15)
+    assert grad_mine[:, 12:].abs().max() > 0  # torso joints carry gradient

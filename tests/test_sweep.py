@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import json
+import os
+import subprocess
+import sys
 
 import pytest
 import torch
@@ -11,17 +15,30 @@ import torch
 from pimann.core.errors import PimannError
 from pimann.learn.model_files import load_model
 from pimann.learn.sweep import SWEEP_DIR, SweepMember, train_from_sweep, train_sweep
-from pimann.learn.train import train_models
+from pimann.learn.train import cublas_problem, train_models
 
 WEIGHTS, SEEDS = [0.0, 10.0], [0, 1]
 CUDA = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs a CUDA device")
 
 
+BATCH = 100  # the 384 training samples in 3 batches and a tail of 84: two graphs on CUDA
+
+
 @pytest.fixture(scope="module")
 def sweep_params(params):
-    """The small training in float32 (bfloat16 products would blur the comparison)."""
-    train = dataclasses.replace(params.train, precision="float32", workers=1, seeds=SEEDS)
+    """The small training in float32 (bfloat16 products would blur the comparison), at a batch
+    that leaves a tail (its own step, and on CUDA its own graph and memory pool)."""
+    train = dataclasses.replace(
+        params.train, precision="float32", workers=1, seeds=SEEDS, batch_size=BATCH
+    )
     return dataclasses.replace(params, train=train)
+
+
+def test_the_training_set_leaves_a_tail_batch(dataset_path):
+    from pimann.learn.dataset import read_dataset
+
+    n = len(read_dataset(dataset_path).x_train)
+    assert n > BATCH and n % BATCH != 0
 
 
 @pytest.fixture(scope="module")
@@ -30,8 +47,9 @@ def solo(tmp_path_factory, sweep_params, dataset_path):
     root = tmp_path_factory.mktemp("solo")
     metas = {}
     for w in WEIGHTS:
+        plots = root / "plots" / f"w{w:g}"
         for seed, meta in train_models(
-            dataset_path, root / f"w{w:g}", w, SEEDS, sweep_params, "cpu"
+            dataset_path, root / f"w{w:g}", w, SEEDS, sweep_params, "cpu", plots_dir=plots
         ).items():
             metas[SweepMember(w, seed)] = (meta, root / f"w{w:g}" / str(seed))
     return metas
@@ -110,7 +128,15 @@ def test_the_stages_write_each_weight_out_of_one_sweep(tmp_path, sweep_params, d
         plots_dir=tmp_path / "plots" / "w0",
     )
     assert (models / SWEEP_DIR).is_dir()  # kept for w=10's stage
-    train_from_sweep(dataset_path, models / "w10", 10, WEIGHTS, sweep_params, "cpu")
+    train_from_sweep(
+        dataset_path,
+        models / "w10",
+        10,
+        WEIGHTS,
+        sweep_params,
+        "cpu",
+        plots_dir=tmp_path / "plots" / "w10",
+    )
     assert not (models / SWEEP_DIR).exists()  # every weight is out
     for member, (meta, folder) in solo.items():
         written = models / f"w{member.pi_weight:g}" / str(member.seed)
@@ -122,7 +148,25 @@ def test_the_stages_write_each_weight_out_of_one_sweep(tmp_path, sweep_params, d
         for name, value in model.state_dict().items():
             torch.testing.assert_close(value, reference.state_dict()[name], rtol=0, atol=1e-6)
     assert metas[0]["best_epoch"] == solo[SweepMember(0.0, 0)][0]["best_epoch"]
-    assert (tmp_path / "plots" / "w0" / "seed1.csv").is_file()
+    # the loss CSVs: the same columns and, to float tolerance, the same values (w = 0's
+    # train_pi included: L_B after each epoch on a sample, as the CPU's trainer logs it)
+    for member, (_, folder) in solo.items():
+        name = f"w{member.pi_weight:g}/seed{member.seed}.csv"
+        mine = _read_csv(tmp_path / "plots" / name)
+        theirs = _read_csv(folder.parent.parent / "plots" / name)
+        assert list(mine[0]) == list(theirs[0]) and len(mine) == len(theirs) == 4
+        for row, reference in zip(mine, theirs, strict=True):
+            for column, value in reference.items():
+                assert float(row[column]) == pytest.approx(float(value), rel=1e-5, abs=1e-9), (
+                    name,
+                    column,
+                )
+        assert min(float(row["train_pi"]) for row in mine) > 0
+
+
+def _read_csv(path) -> list[dict[str, str]]:
+    with path.open(newline="") as file:
+        return list(csv.DictReader(file))
 
 
 def test_what_the_sweep_cannot_do_is_refused(tmp_path, sweep_params, dataset_path):
@@ -133,6 +177,24 @@ def test_what_the_sweep_cannot_do_is_refused(tmp_path, sweep_params, dataset_pat
     if not torch.cuda.is_available():
         with pytest.raises(PimannError, match="CUDA"):
             train_sweep(dataset_path, WEIGHTS, SEEDS, sweep_params, "cpu", graph=True)
+
+
+def test_cublas_is_set_at_import_and_checked():
+    """Deterministic cuBLAS: the setting is in the environment once the trainers are
+    imported, and a CUDA training refuses a wrong or late one (a CPU one needs none)."""
+    env = {k: v for k, v in os.environ.items() if k != "CUBLAS_WORKSPACE_CONFIG"}
+    code = "import os, pimann.learn.sweep; print(os.environ['CUBLAS_WORKSPACE_CONFIG'])"
+    out = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == ":4096:8"
+    cuda, cpu = torch.device("cuda"), torch.device("cpu")
+    assert cublas_problem(cuda, ":4096:8", late=False) is None
+    assert cublas_problem(cuda, ":16:8", late=False) is None
+    assert "is not one of" in cublas_problem(cuda, None, late=False)
+    assert "is not one of" in cublas_problem(cuda, ":0:0", late=False)
+    assert "after CUDA started" in cublas_problem(cuda, ":4096:8", late=True)
+    assert cublas_problem(cpu, None, late=True) is None
 
 
 @CUDA

@@ -7,6 +7,12 @@ typed by hand. Only the chains from the base to the requested frames are compute
 are stacked on one tensor dimension so that one Python step per joint depth serves all of them.
 
 Shapes: any leading batch dims `...`; joints are in the study's order (`robot.JOINT_NAMES`).
+
+On CUDA (`graph_safe`) the cumulative sum along the chains and the scatter of the Jacobian's
+columns are products with constant 0/1 matrices instead: torch has no deterministic CUDA
+kernel for a float cumsum, and the deterministic scatter checks its indices with a host sync,
+which a CUDA graph cannot capture. The products give the same values (the scatter's exactly,
+the sum's to rounding); the CPU keeps cumsum and scatter_add.
 """
 
 from __future__ import annotations
@@ -72,6 +78,11 @@ class TorchKinematics(nn.Module):
     R_local(q) = P (I + sin q K + (1 - cos q) K^2) (Rodrigues), with P K and P K^2 precomputed,
     so one step costs one 3x3 product for all chains at once. Chains shorter than the longest
     are padded at their end with identity joints (no rotation, no offset, zero axis).
+
+    `graph_safe`: take the constant-matrix products (module docstring) in place of cumsum and
+    scatter_add; None: on CUDA tensors only. Chains whose joints are not contiguous in the
+    study's order are gathered by a product with a constant selection matrix (index_select's
+    deterministic backward syncs with the host).
     """
 
     def __init__(
@@ -80,8 +91,10 @@ class TorchKinematics(nn.Module):
         dtype: torch.dtype = torch.float64,
         device: torch.device | str | None = None,
         frames: tuple[str, ...] = (LEFT_SOLE, RIGHT_SOLE),
+        graph_safe: bool | None = None,
     ):
         super().__init__()
+        self.graph_safe = graph_safe
         model = robot.model
         self.frames = tuple(frames)
         study_index = {name: i for i, name in enumerate(JOINT_NAMES)}
@@ -143,13 +156,35 @@ class TorchKinematics(nn.Module):
         flat = index.reshape(-1)
         contiguous = bool(np.all(np.diff(flat) == 1))
         self._slice = (int(flat[0]), len(flat)) if contiguous else None
+        # constant 0/1 matrices of the graph-safe path: the gather (26, C L), the scatter of
+        # the joint columns (C, L, 26; padding steps select nothing), the prefix sum (L+1)^2
+        real = np.zeros((n, depth), dtype=bool)
+        for c, chain in enumerate(chains):
+            real[c, : len(chain)] = True
+        select = np.zeros((N_JOINTS, n * depth))
+        select[flat, np.arange(n * depth)] = 1.0
+        scatter = np.zeros((n, depth, N_JOINTS))
+        chain_i, step_i = np.nonzero(real)
+        scatter[chain_i, step_i, index[real]] = 1.0
+        constants = {
+            "select": select,
+            "scatter": scatter,
+            "prefix": np.tril(np.ones((depth + 1,) * 2)),
+        }
+        for name, value in constants.items():
+            tensor = torch.as_tensor(value, dtype=dtype, device=device)
+            self.register_buffer(name, tensor, persistent=False)
+
+    def _graph_safe(self, tensor: torch.Tensor) -> bool:
+        """Whether to take the constant-matrix products: `graph_safe`, else on CUDA tensors."""
+        return tensor.is_cuda if self.graph_safe is None else self.graph_safe
 
     def gather(self, values: torch.Tensor) -> torch.Tensor:
         """(..., 26) per-joint values -> (..., C, L) along the chains (padding repeats one)."""
         if self._slice is not None:
             values = values.narrow(-1, *self._slice)
         else:
-            values = values.index_select(-1, self.index_flat)
+            values = values @ self.select
         return values.unflatten(-1, (len(self.frames), self.depth))
 
     def chains(self, joints: torch.Tensor) -> ChainKinematics:
@@ -170,7 +205,8 @@ class TorchKinematics(nn.Module):
         moved_t = moved.transpose(-1, -2)  # (..., C, L, 5, 3)
         axes = torch.cat((first[..., 0, :, :], moved_t[..., :-1, 0, :]), -2)
         steps = torch.cat((first[..., 1, :, :], moved_t[..., :, 1, :]), -2)
-        positions = steps.cumsum(-2)  # (..., C, L + 1, 3)
+        # (..., C, L + 1, 3) the joint origins, then the end frame's
+        positions = self.prefix @ steps if self._graph_safe(steps) else steps.cumsum(-2)
         return ChainKinematics(
             joint_positions=positions[..., :-1, :],
             joint_axes=axes,
@@ -195,9 +231,12 @@ class TorchKinematics(nn.Module):
         upper = torch.cat((rot_t, -rot_t @ skew), -1)
         lower = torch.cat((torch.zeros_like(rot_t), rot_t), -1)
         base_block = torch.cat((upper, lower), -2)  # (..., C, 6, 6)
-        joint_block = columns.new_zeros(columns.shape[:-1] + (N_JOINTS,))
-        index = self.index.unsqueeze(-2).expand(columns.shape)
-        joint_block = joint_block.scatter_add(-1, index, columns)
+        if self._graph_safe(columns):
+            joint_block = columns @ self.scatter  # (..., C, 6, 26)
+        else:
+            joint_block = columns.new_zeros(columns.shape[:-1] + (N_JOINTS,))
+            index = self.index.unsqueeze(-2).expand(columns.shape)
+            joint_block = joint_block.scatter_add(-1, index, columns)
         jacobian = torch.cat((base_block, joint_block), -1)
         world_rot = base_rotation.unsqueeze(-3) @ chain.frame_rotations
         world_pos = base_position.unsqueeze(-2) + (

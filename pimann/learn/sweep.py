@@ -29,7 +29,6 @@ import dataclasses
 import json
 import logging
 import math
-import os
 import shutil
 import time
 from collections.abc import Callable
@@ -50,6 +49,7 @@ from pimann.learn.mann import MANN
 from pimann.learn.train import (
     _deterministic,
     _fingerprint,
+    check_cublas,
     pick_precision,
     training_subset,
     write_models,
@@ -135,6 +135,15 @@ def _capture(steps: list[_Step], generators: list[torch.Generator]) -> list[Call
     The warm-up (on a side stream, as torch's capture needs) creates the optimiser's state
     and moves the weights; both are put back in place, so the graphs see the same tensors and
     the run starts where it would have without them.
+
+    Each member's dropout generator is registered with every graph: a replay first writes
+    each generator's seed and offset into the graph's two device scalars (torch's replay
+    prologue, two fills a generator, 50 launches a step for 25 members, outside the graph);
+    the epoch's reseeding (manual_seed) only sets host values that the prologue then copies.
+    One generator for the whole ensemble would make it 2 launches but draw other masks than
+    pimann.learn.train's per-seed generators; masks hashed on the device from per-member seed
+    tensors and a step counter would need no generator, but the CPU's trainer would have to
+    draw its masks the same way, which changes its models.
     """
     model, optimizer = steps[0].model, steps[0].optimizer
     weights = [p.detach().clone() for p in model.parameters()]
@@ -202,8 +211,7 @@ def train_sweep(
     graph = device.type == "cuda" if graph is None else graph
     if graph and device.type != "cuda":
         raise PimannError(None, "a CUDA graph needs a CUDA device")
-    if device.type == "cuda":
-        os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+    check_cublas(device)
     members = sweep_members(pi_weights, seeds)
     count = len(members)
     data = read_dataset(dataset_path) if data is None else data
@@ -299,6 +307,13 @@ def train_sweep(
         logger=log,
         enabled=progress is not None,
     )
+    # a w = 0 member's in-step L_B is not what pimann.learn.train logs as its train_pi (it
+    # takes none in its steps): that is L_B after the epoch, dropout off, on every
+    # (n // 4096)-th training sample; taken here the same way, on the same samples
+    unweighted = None
+    if any(m.pi_weight == 0.0 for m in members):
+        every = max(1, n // 4096)
+        unweighted = (x_train[::every], y_train[::every])
     saved_at = time.monotonic()
     member_seeds = [m.seed for m in members]
     with concurrent.futures.ThreadPoolExecutor(1) as pool:
@@ -319,7 +334,11 @@ def train_sweep(
                 run[size]()
                 at += size
             test_mse, test_pi = batched_loss(model, loss_fn, x_test, y_test, config.eval_batch_size)
-            history[epoch] = torch.stack([totals[0] / n, totals[1] / n, test_mse, test_pi])
+            train_pi = totals[1] / n
+            if unweighted is not None:  # w = 0 members' train_pi as the CPU's trainer logs it
+                sampled = batched_loss(model, loss_fn, *unweighted, config.eval_batch_size)[1]
+                train_pi = torch.where(weights == 0, sampled, train_pi)
+            history[epoch] = torch.stack([totals[0] / n, train_pi, test_mse, test_pi])
             test = test_mse + weights * test_pi
             better = test < best_loss
             best_loss.copy_(torch.where(better, test, best_loss))

@@ -55,6 +55,12 @@ from pimann.learn.training_loss import TrainingLoss
 
 log = logging.getLogger(__name__)
 
+# Deterministic cuBLAS needs this workspace setting, which cuBLAS reads once, when it starts:
+# set at import, ahead of the training's first CUDA call; check_cublas refuses a late one.
+CUBLAS_VARIABLE, CUBLAS_SETTINGS = "CUBLAS_WORKSPACE_CONFIG", (":4096:8", ":16:8")
+_CUBLAS_LATE = CUBLAS_VARIABLE not in os.environ and torch.cuda.is_initialized()
+os.environ.setdefault(CUBLAS_VARIABLE, CUBLAS_SETTINGS[0])
+
 CHECKPOINT_FILE = "checkpoint.pt"
 LOSS_COLUMNS = ("train_loss", "train_mse", "train_pi", "test_loss", "test_mse", "test_pi")
 
@@ -127,6 +133,27 @@ def _fingerprint(
     digest = hashlib.sha256(dataset_path.read_bytes()).hexdigest()
     blob = json.dumps([digest, pi_weight, seeds, as_dict(params.model), train], sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def cublas_problem(
+    device: torch.device, setting: str | None, late: bool = _CUBLAS_LATE
+) -> str | None:
+    """Why a training on `device` would not be deterministic under this cuBLAS `setting`
+    (None: it would be): unset or another value, or set only after CUDA had started."""
+    if device.type != "cuda":
+        return None
+    if setting not in CUBLAS_SETTINGS:
+        return f"{CUBLAS_VARIABLE}={setting} is not one of {', '.join(CUBLAS_SETTINGS)}"
+    if late:
+        return f"{CUBLAS_VARIABLE} was set after CUDA started: export it before python starts"
+    return None
+
+
+def check_cublas(device: torch.device) -> None:
+    """Refuse a CUDA training whose cuBLAS would not be deterministic (cublas_problem)."""
+    problem = cublas_problem(device, os.environ.get(CUBLAS_VARIABLE))
+    if problem is not None:
+        raise PimannError(None, f"deterministic training on {device}: {problem}")
 
 
 @contextlib.contextmanager
@@ -254,8 +281,7 @@ def _train_group(job: _GroupJob) -> dict[int, dict] | None:
     with _torch_threads(job.threads), _deterministic():
         config, seeds, pi_weight = job.params.train, job.seeds, job.pi_weight
         device = torch.device(job.device)
-        if device.type == "cuda":
-            os.environ.setdefault("CUBLAS_WORKSPACE_CONFIG", ":4096:8")
+        check_cublas(device)
         checkpoint = job.checkpoint_dir / ("seeds-" + "-".join(map(str, seeds))) / CHECKPOINT_FILE
 
         # the data, on the device
