@@ -49,6 +49,7 @@ from pimann.evaluate.claims import (
     claims_markdown,
     evaluate_claims,
 )
+from pimann.evaluate.gait import GAIT_SUMMARY, with_data_gait
 from pimann.evaluate.metrics import aggregate
 
 log = logging.getLogger(__name__)
@@ -77,6 +78,7 @@ SUMMARY_METRICS = [
     "drift_y_max_abs",
     "drift_yaw_max_abs",
     "walks",
+    *GAIT_SUMMARY,
 ]
 BASE_COLUMNS = ["time", "base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw"]
 FOOT_COLUMNS = ["time"] + [
@@ -312,6 +314,7 @@ def evaluate_all(
     write_timeseries(rollouts_dir, Path(results_dir) / "timeseries", selection, params)
     name = params.features.input if data is None else data
     reference = data_reference(REPO_ROOT / name, params, workers, str(name))
+    frame = with_data_gait(frame, reference, params.evaluate.gait_speed_band)  # beside each row
     info = provenance(params, rollouts_dir)
     claims = write_results(frame, results_dir, params, info, selection, reference)
     following = collect_following(rollouts_dir, params, workers, REPO_ROOT / name)

@@ -46,6 +46,7 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
+import pandas as pd
 
 from pimann.core.contacts import contacts_from_heights, frame_period, true_runs
 from pimann.core.errors import PimannError
@@ -71,6 +72,10 @@ MEASURES = (
 # commanded speed) and `data_gait_windows` (how many)
 DATA_MEASURES = MEASURES
 FORWARD = CLASSES.index("forward")
+# the gait columns summarised over seeds in metrics_summary.json (metrics.csv keeps them all)
+GAIT_SUMMARY = [f"gait_{name}" for name in ("speed_ratio", "heading_change", *MEASURES)] + [
+    f"data_gait_{name}" for name in ("cadence", "step_length")
+]
 
 
 def _none(value: float) -> float | None:
@@ -382,3 +387,13 @@ def data_gait_columns(
             columns["data_gait_windows"] = level["cadence"]["n"]
         out.append(columns)
     return out
+
+
+def with_data_gait(
+    frame: pd.DataFrame, reference: dict[str, Any] | None, band: float
+) -> pd.DataFrame:
+    """metrics.csv's rows with the data's level at each commanded speed (`data_gait_columns`)
+    from the data reference's `gait` record beside them."""
+    windows = windows_of((reference or {}).get("gait"))
+    columns = data_gait_columns(frame.to_dict("records"), windows, band)
+    return pd.concat([frame, pd.DataFrame(columns, index=frame.index)], axis=1)
