@@ -170,6 +170,7 @@ def test_the_robot_slid_along_the_floor_glides_without_a_step(robot):
     assert metrics["gait_heading_change"] == pytest.approx(0.0, abs=1e-9)
     no_script = trajectory_metrics(make_trajectory(xy), robot, EVALUATE_PARAMS, CONTACT_PARAMS)
     assert no_script["gait_speed"] is None and no_script["gait_glide_share"] == 1.0
+    assert no_script["gait_heading_change"] == pytest.approx(0.0, abs=1e-9)
 
 
 def test_a_real_walk_steps_as_its_own_contacts_count(robot, real_walks):
@@ -213,3 +214,33 @@ def test_the_datas_level_is_the_windows_near_the_speed():
     assert math.isclose(columns[0]["data_gait_step_length"], 0.35 / 1.4)
     assert columns[1]["data_gait_cadence"] is None and columns[2]["data_gait_windows"] == 0
     assert columns[3]["data_gait_windows"] == 0 and columns[3]["data_gait_cadence"] is None
+
+
+def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_path):
+    from builders import AGREEING, REFERENCE, SCENARIO, WEIGHTS, crafted_metrics
+
+    from pimann.core.params import load_params
+    from pimann.evaluate.evaluation import provenance, write_results
+    from pimann.report.key_metrics import MAX_VALUES, key_metrics
+    from pimann.report.page import build_report
+
+    params = load_params()
+    cadence = {model: 1.0 + 0.1 * k for k, model in enumerate(WEIGHTS)}
+    values = {
+        **AGREEING,
+        "gait_cadence": cadence,
+        "gait_step_length": dict.fromkeys(WEIGHTS, 0.18),
+        "data_gait_cadence": dict.fromkeys(WEIGHTS, 1.39),
+        "data_gait_step_length": dict.fromkeys(WEIGHTS, 0.284),
+    }
+    root = tmp_path / "results"
+    write_results(crafted_metrics(values), root, params, provenance(params), {}, REFERENCE)
+    metrics = key_metrics(root, params)
+    assert len(metrics) <= MAX_VALUES
+    assert metrics[f"{SCENARIO}.w10.gait_cadence"] == pytest.approx(cadence["w10"])
+    assert metrics[f"{SCENARIO}.w10.gait_glide_share"] is None  # not in this metrics.csv
+    assert metrics["data.gait_cadence"] == pytest.approx(1.39 * 1.0)  # the median seed's
+    assert metrics["data.gait_step_length"] == pytest.approx(0.284)
+    page = build_report(root, tmp_path / "figures", params, metrics)
+    gait = page[page.index("The gait over the last seconds") :]
+    assert "data at the commanded speed</td><td>–</td><td>1.39</td><td>0.284</td>" in gait

@@ -270,6 +270,7 @@ def trajectory_gait(
         else dict.fromkeys(FOLLOWING)
     )
     out.update(following)
+    out["heading_change"] = float(yaw[window[1] - 1] - yaw[window[0]])  # no command needed
     out["command_forward"] = None if command is None else commanded_forward(command, window)
     return {f"gait_{name}": value for name, value in out.items()}
 
