@@ -244,3 +244,27 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
     page = build_report(root, tmp_path / "figures", params, metrics)
     gait = page[page.index("The gait over the last seconds") :]
     assert "data at the commanded speed</td><td>–</td><td>1.39</td><td>0.284</td>" in gait
+
+
+def test_the_datas_windows_come_from_its_stepping_originals(real_walks, tmp_path):
+    from pimann.core.params import load_params
+    from pimann.core.trajectory import write_collection
+    from pimann.evaluate.data_reference import data_reference
+    from pimann.evaluate.gait import DATA_WINDOW_S, windows_of
+
+    params = load_params()
+    path = tmp_path / "walking.h5"
+    walk, mirror = real_walks["walk"], real_walks["walk_mirrored"]
+    assert mirror.attrs.get("mirrored")
+    write_collection(path, [("walk", walk), ("walk_mirrored", mirror)])
+    both = data_reference(path, params, workers=1)["gait"]
+    write_collection(path, [("walk", walk)])
+    alone = data_reference(path, params, workers=1)["gait"]
+    assert both["windows"] == alone["windows"] >= 2  # the mirror is not counted again
+    windows = windows_of(both)
+    assert all(w["window_s"] >= DATA_WINDOW_S - 1e-9 for w in windows)
+    for w in windows:  # both ends on touchdowns: step x cadence is the window's speed
+        assert 1.2 < w["cadence"] < 2.2 and w["glide_share"] == 0.0
+        assert w["step_length"] * w["cadence"] == pytest.approx(w["speed"], rel=0.2)
+    speed = f"{round(float(np.median([w['speed'] for w in windows])), 1):.1f}"
+    assert both["by_speed"][speed]["cadence"]["n"] >= 1
