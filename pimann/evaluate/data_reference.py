@@ -84,6 +84,7 @@ def clip_reference(
             a.displacement[:, :2],
             params,
             contacts,
+            contacts=a.contacts,  # the rule's: file_contacts is off
         )
     return row
 

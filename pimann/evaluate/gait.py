@@ -101,13 +101,21 @@ def swings(contacts: np.ndarray) -> list[tuple[int, int, int]]:
     return sorted(found, key=lambda swing: (swing[2], swing[0]))
 
 
-def _footprint(xy: np.ndarray, contacts: np.ndarray, frame: int, step: int) -> np.ndarray:
-    """Median horizontal position of the stance that holds `frame`, walked by `step` (+-1)."""
-    end = frame
-    while 0 <= end + step < len(contacts) and contacts[end + step]:
-        end += step
-    lo, hi = sorted((frame, end))
-    return np.median(xy[lo : hi + 1], axis=0)
+def _step_lengths(
+    positions: np.ndarray, contacts: np.ndarray, counted: list[tuple[int, int, int]]
+) -> list[float]:
+    """Half the distance between each counted swing's footprints: the sole origin's median
+    horizontal position over the stance before it and over the one after it."""
+    stances = [true_runs(contacts[:, foot]) for foot in range(contacts.shape[1])]
+    ending = [{stop: start for start, stop in runs} for runs in stances]
+    starting = [dict(runs) for runs in stances]
+    lengths = []
+    for foot, off, on in counted:
+        before = positions[ending[foot][off] : off, foot, :2]
+        after = positions[on : starting[foot][on], foot, :2]
+        shift = np.median(after, axis=0) - np.median(before, axis=0)
+        lengths.append(0.5 * float(np.linalg.norm(shift)))
+    return lengths
 
 
 def window_gait(
@@ -132,16 +140,7 @@ def window_gait(
         raise PimannError(None, f"gait window [{start}, {stop}) outside {len(time)} frames")
     duration = float(time[stop - 1] - time[start])
     counted = [s for s in swings(contacts) if start < s[2] < stop]  # landed after the start
-    lengths = [
-        0.5
-        * float(
-            np.linalg.norm(
-                _footprint(positions[:, f, :2], contacts[:, f], on, +1)
-                - _footprint(positions[:, f, :2], contacts[:, f], off - 1, -1)
-            )
-        )
-        for f, off, on in counted
-    ]
+    lengths = _step_lengths(positions, contacts, counted)
     apexes = [float(heights[off:on, f].max()) for f, off, on in counted]
     frames = slice(start, stop)
     base_speed = np.linalg.norm(np.gradient(base_xy, time, axis=0), axis=-1)[frames]
@@ -248,15 +247,18 @@ def trajectory_gait(
     yaw: np.ndarray,
     params: EvaluateParams,
     contact_params: ContactParams,
+    contacts: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """`gait_<measure>` of a trajectory over its last `evaluate.gait_window_s` (module
     docstring); the command's measures are None for a file that records no script.
 
     heights, positions, pitches, corner_velocities: the soles (pimann.evaluate.metrics.analyse,
-    reused, not recomputed); base_xy (T, 2), yaw (T,) unwrapped, in one world frame.
+    reused, not recomputed); base_xy (T, 2), yaw (T,) unwrapped, in one world frame; contacts
+    (T, 2): the rule's on `heights` where already at hand (a file's own flags never).
     """
     time = np.asarray(trajectory.time, dtype=float)
-    contacts = contacts_from_heights(heights, frame_period(trajectory), contact_params)
+    if contacts is None:
+        contacts = contacts_from_heights(heights, frame_period(trajectory), contact_params)
     window = last_window(time, params.gait_window_s)
     speeds = corner_speeds(corner_velocities)
     out = window_gait(time, contacts, heights, positions, pitches, speeds, base_xy, window, params)
@@ -300,6 +302,7 @@ def data_gait_windows(
     contact_params: ContactParams,
     window_s: float = DATA_WINDOW_S,
     hop: int = DATA_WINDOW_HOP,
+    contacts: np.ndarray | None = None,
 ) -> list[dict[str, Any]]:
     """The gait of the windows of a clip's forward walking (module docstring), with each
     window's `speed` (net planar base displacement / duration).
@@ -308,8 +311,8 @@ def data_gait_windows(
     forward; the next starts `hop` touchdowns after it. Both ends on touchdowns, the counted
     swings over the duration are the cadence with no rounding to whole steps.
     """
-    dt = float(np.median(np.diff(time)))
-    contacts = contacts_from_heights(heights, dt, contact_params)
+    if contacts is None:  # the rule's on `heights`, as `trajectory_gait`
+        contacts = contacts_from_heights(heights, float(np.median(np.diff(time))), contact_params)
     speeds = corner_speeds(corner_velocities)
     landings = np.unique([on for _, _, on in swings(contacts)])
     rows = []

@@ -313,6 +313,7 @@ def trajectory_metrics(
         yaw,
         params,
         contacts,
+        a.contacts if a.contacts_source == "detected" else None,  # the rule's, never a file's
     )
     contacts = a.contacts
     metrics: dict[str, Any] = {
