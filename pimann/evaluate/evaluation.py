@@ -2,7 +2,8 @@
 
 Reads the rollouts (layout: pimann.core.rollout_files) and writes under results/
 (`write_results`):
-metrics.csv (one row per rollout: every pimann.evaluate.metrics value), metrics_summary.json
+metrics.csv (one row per rollout: every pimann.evaluate.metrics value, the gait among them, and
+the data's gait at its commanded speed, pimann.evaluate.gait), metrics_summary.json
 (median,
 IQR, min, max over the seeds; the data's own level of the sliding metrics under
 "data_reference", pimann.evaluate.data_reference), timeseries/*.csv and claims.md

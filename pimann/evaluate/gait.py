@@ -31,12 +31,13 @@ origin can stay above the contact height through a stance its corner makes):
   above `evaluate.glide_speed`;
 - contact sole pitch: the median |pitch| of the soles in contact over the window.
 
-The data's level at a speed (`data_gait_level`): the same measures over non-overlapping
-`DATA_WINDOW_S` windows of the data's forward walking (every frame of the window forward,
-pimann.learn.motion_classes), each window's speed its net planar base displacement over its
-duration; at a speed v, the median (and range) of the windows within `evaluate.gait_speed_band`
-of v. A rollout commanded forward gets the data's level at its commanded speed beside its own
-(`data_gait_*` columns of metrics.csv).
+The data's level at a speed (`gait_level`): the same measures over windows of the data's
+forward walking (`data_gait_windows`: every frame forward, pimann.learn.motion_classes; each
+from a touchdown to the first touchdown at least `DATA_WINDOW_S` later, so its cadence is not
+rounded to whole steps), each window's speed its net planar base displacement over its duration;
+at a speed v, the median (and range) of the windows within `evaluate.gait_speed_band` of v. A
+rollout commanded forward gets the data's level at its commanded speed beside its own
+(`data_gait_*` columns of metrics.csv, `with_data_gait`).
 """
 
 from __future__ import annotations
