@@ -60,7 +60,8 @@ DATA_WINDOW_S = 2.0  # s: a data window holds 3-4 steps; the data's forward walk
 #   runs of 2-5 s (a clip turns, stops or walks back between them)
 DATA_WINDOW_HOP = 1  # touchdowns between window starts: windows overlap, one per step
 SPEED_BINS = tuple(round(0.1 * k, 1) for k in range(2, 14))  # m/s: the data's level by speed
-# the per-window measures, in metrics.csv as `gait_<name>`
+# the per-window measures, in metrics.csv as `gait_<name>`, and the data's level at the
+# commanded speed beside each rollout as `data_gait_<name>` (with `data_gait_windows`)
 MEASURES = (
     "cadence",
     "step_length",
@@ -69,9 +70,6 @@ MEASURES = (
     "glide_share",
     "contact_sole_pitch",
 )
-# the data's level beside each rollout: `data_gait_<name>` (median of the windows near the
-# commanded speed) and `data_gait_windows` (how many)
-DATA_MEASURES = MEASURES
 FORWARD = CLASSES.index("forward")
 # the gait columns summarised over seeds in metrics_summary.json (metrics.csv keeps them all)
 GAIT_SUMMARY = [f"gait_{name}" for name in ("speed_ratio", "heading_change", *MEASURES)] + [
@@ -384,11 +382,11 @@ def data_gait_columns(
     out = []
     for row in rows:
         speed, forward = row.get("gait_command_speed"), row.get("gait_command_forward")
-        columns: dict[str, Any] = {f"data_gait_{name}": None for name in DATA_MEASURES}
+        columns: dict[str, Any] = {f"data_gait_{name}": None for name in MEASURES}
         columns["data_gait_windows"] = 0
         if forward in (True, 1) and speed is not None and math.isfinite(float(speed)):
             level = gait_level(windows, float(speed), band)
-            columns.update({f"data_gait_{n}": level[n]["median"] for n in DATA_MEASURES})
+            columns.update({f"data_gait_{n}": level[n]["median"] for n in MEASURES})
             columns["data_gait_windows"] = level["cadence"]["n"]
         out.append(columns)
     return out
