@@ -131,6 +131,9 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     for metric in ("support_rmse_linear_total", "support_rmse_paper_linear_total"):
         assert row[metric] == pytest.approx(expected[metric], rel=1e-5)
     assert set(frame["variant"]) == {"full", "ground_projected"}
+    assert row["gait_cadence"] == pytest.approx(expected["gait_cadence"])  # every row's gait
+    assert frame["gait_glide_share"].notna().all() and frame["gait_command_speed"].notna().all()
+    assert (frame["data_gait_windows"] == 0).all()  # the data's clips glide, never step
     names = sorted(p.stem for p in (results / "timeseries").glob("*.csv"))
     assert names == ["base_baseline", "base_pi", "base_pi_steering", "feet_w10"]
     base = pd.read_csv(results / "timeseries" / "base_pi.csv")

@@ -1,6 +1,6 @@
 """The study's key numbers (pimann.report.key_metrics): results/metrics.json, the pipeline's only
 DVC
-metrics, flat and at most a hundred values, from a crafted results/ folder."""
+metrics, flat and at most `MAX_VALUES` values, from a crafted results/ folder."""
 
 from __future__ import annotations
 

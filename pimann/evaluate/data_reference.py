@@ -10,6 +10,9 @@ RMSE a 10 s forward rollout as good as the clip would score. The level is the me
 clips with at least `MIN_FORWARD_FRAMES` forward frames, over all clips and over the test clips
 (the features stage's split by source clip, a clip and its mirror together).
 
+The data's gait (pimann.evaluate.gait, `gait`): windows of its forward walking, the originals
+only (a mirror steps as its clip does), each with its speed, and the level by speed.
+
 Beside them, where in a stance the data slides (pimann.evaluate.sliding: the shares of the
 linear sums just after touchdown, mid-stance and before lift-off, over the same forward frames).
 
@@ -30,7 +33,8 @@ from pimann.core.parallel import pool_map
 from pimann.core.params import ContactParams, EvaluateParams, Params
 from pimann.core.robot import load_robot
 from pimann.core.trajectory import Trajectory, iter_collection
-from pimann.evaluate.metrics import PAPER_SLIDING, SLIDING, aggregate, sliding_frames
+from pimann.evaluate.gait import data_gait_windows, gait_reference
+from pimann.evaluate.metrics import PAPER_SLIDING, SLIDING, aggregate, analyse
 from pimann.evaluate.sliding import PHASES, SHARE_METRICS, phase_share_metrics
 from pimann.learn.features import split_sources
 from pimann.learn.motion_classes import CLASSES, motion_classes
@@ -50,8 +54,10 @@ def clip_reference(
 ) -> dict[str, Any]:
     """One clip: its forward frames and every sliding total over them, per `FRAMES` frames."""
     robot = load_robot("retarget")
-    sliding = sliding_frames(trajectory, robot, params, contacts, file_contacts=False)
-    forward = np.asarray(CLASSES)[motion_classes(trajectory)] == "forward"
+    a = analyse(trajectory, robot, params, contacts, file_contacts=False)  # one pass, both uses
+    sliding = {name: np.where(a.contacts_of(name), a.rms(name), 0.0) for name in SLIDING}
+    classes = motion_classes(trajectory)
+    forward = np.asarray(CLASSES)[classes] == "forward"
     row: dict[str, Any] = {
         "frames": len(forward),
         "forward_frames": int(forward.sum()),
@@ -65,7 +71,21 @@ def clip_reference(
         value = FRAMES * float(per_frame[counted].mean()) if counted.any() else None
         row[f"support_rmse_{name}_total"] = value
     rms = {name: sliding[name] for name in SHARE_METRICS}
-    row.update(phase_share_metrics(rms, sliding["contacts"], trajectory.rate_hz, forward))
+    row.update(phase_share_metrics(rms, a.contacts, trajectory.rate_hz, forward))
+    row["gait_windows"] = []  # a mirror steps as its clip does: counted once
+    if not trajectory.attrs.get("mirrored", False):
+        row["gait_windows"] = data_gait_windows(
+            a.time,
+            classes,
+            a.feet.heights,
+            a.feet.positions,
+            a.feet.pitches,
+            a.sole_velocities["contact_point"],
+            a.displacement[:, :2],
+            params,
+            contacts,
+            contacts=a.contacts,  # the rule's: file_contacts is off
+        )
     return row
 
 
@@ -108,6 +128,7 @@ def data_reference(
         "joint_velocities": "file" if any(r["joint_velocities"] for r in rows) else "differences",
         "all": _subset(rows),
         "test": _subset([r for r, s in zip(rows, sources, strict=True) if s in test]),
+        "gait": gait_reference([w for r in rows for w in r["gait_windows"]], params.evaluate),
     }
 
 

@@ -2,7 +2,8 @@
 
 Reads the rollouts (layout: pimann.core.rollout_files) and writes under results/
 (`write_results`):
-metrics.csv (one row per rollout: every pimann.evaluate.metrics value), metrics_summary.json
+metrics.csv (one row per rollout: every pimann.evaluate.metrics value, the gait among them, and
+the data's gait at its commanded speed, pimann.evaluate.gait), metrics_summary.json
 (median,
 IQR, min, max over the seeds; the data's own level of the sliding metrics under
 "data_reference", pimann.evaluate.data_reference), timeseries/*.csv and claims.md
@@ -49,6 +50,7 @@ from pimann.evaluate.claims import (
     claims_markdown,
     evaluate_claims,
 )
+from pimann.evaluate.gait import GAIT_SUMMARY, with_data_gait
 from pimann.evaluate.metrics import aggregate
 
 log = logging.getLogger(__name__)
@@ -77,6 +79,7 @@ SUMMARY_METRICS = [
     "drift_y_max_abs",
     "drift_yaw_max_abs",
     "walks",
+    *GAIT_SUMMARY,
 ]
 BASE_COLUMNS = ["time", "base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw"]
 FOOT_COLUMNS = ["time"] + [
@@ -312,6 +315,7 @@ def evaluate_all(
     write_timeseries(rollouts_dir, Path(results_dir) / "timeseries", selection, params)
     name = params.features.input if data is None else data
     reference = data_reference(REPO_ROOT / name, params, workers, str(name))
+    frame = with_data_gait(frame, reference, params.evaluate.gait_speed_band)  # beside each row
     info = provenance(params, rollouts_dir)
     claims = write_results(frame, results_dir, params, info, selection, reference)
     following = collect_following(rollouts_dir, params, workers, REPO_ROOT / name)

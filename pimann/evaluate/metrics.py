@@ -55,6 +55,7 @@ from pimann.core.params import ContactParams, EvaluateParams
 from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
 from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch, to_heading_frame
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
+from pimann.evaluate.gait import trajectory_gait
 from pimann.evaluate.sliding import (
     SHARE_METRICS,
     authors_sole_velocities,
@@ -299,6 +300,21 @@ def trajectory_metrics(
     (the data measured as the rollouts are)."""
     robot = robot or load_robot("retarget")
     a = analyse(trajectory, robot, params, contacts, file_contacts)
+    feet = a.feet  # the gait measures (pimann.evaluate.gait) reuse this pass's soles
+    corners = a.sole_velocities["contact_point"]
+    base_xy, yaw = a.displacement[:, :2], a.angles[:, 2]
+    gait = trajectory_gait(
+        trajectory,
+        feet.heights,
+        feet.positions,
+        feet.pitches,
+        corners,
+        base_xy,
+        yaw,
+        params,
+        contacts,
+        a.contacts if a.contacts_source == "detected" else None,  # the rule's, never a file's
+    )
     contacts = a.contacts
     metrics: dict[str, Any] = {
         "source": trajectory.source,
@@ -342,6 +358,7 @@ def trajectory_metrics(
     metrics["drift_yaw_max_abs"] = float(np.abs(a.angles[:, 2]).max())
     walked = final[0] >= params.walk_distance and metrics["touchdowns"] >= WALK_TOUCHDOWNS
     metrics["walks"] = bool(walked)
+    metrics.update(gait)
     return metrics
 
 

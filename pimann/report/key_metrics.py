@@ -15,7 +15,10 @@ and stable from run to run (a value that cannot be had is null):
   linear and angular), ours beside (`HEADLINE`), and the share of seeds that walk; and the
   base drift (max |y|, max |yaw|) of the baseline and the featured PI model
   (evaluate.pi_weight), unsteered and steered;
-- `data.sliding_*`: the retargeted data's own level of each sliding measure;
+- `<scenario>.<model>.gait_*` (`GAIT`): the gait's medians over the seeds, unsteered (speed
+  over the commanded one, cadence, step length, glide share; pimann.evaluate.gait);
+- `data.sliding_*`: the retargeted data's own level of each sliding measure; `data.gait_*`
+  (`DATA_GAIT`): the data's gait at the scenario's commanded speed;
 - `following.<model>.<steering>`: the share of motion classes whose every criterion passes
   (pimann.evaluate.command_following_measures), on the held-out split, and `following.data` for
   the test clips themselves;
@@ -52,7 +55,7 @@ from pimann.evaluate.claims import (
 )
 
 METRICS_FILE = "metrics.json"
-MAX_VALUES = 100  # `dvc metrics show` stays readable
+MAX_VALUES = 150  # `dvc metrics show` stays readable
 DIGITS = 4  # significant digits: a seed's spread is far wider than the fifth
 STATUS_CODES = {
     HOLDS: 1.0,
@@ -72,6 +75,19 @@ HEADLINE = {  # key: metrics.csv column, medians per model on the scenario, unst
     "walks": "walks",
 }
 SLIDING_KEYS = [key for key in HEADLINE if key.startswith("sliding_")]
+# the gait (pimann.evaluate.gait) per model, medians over the seeds, unsteered, on the scenario;
+# `data.<key>` the data's level at the scenario's commanded speed (its `data_gait_*` columns)
+GAIT = {
+    "gait_speed_ratio": "gait_speed_ratio",
+    "gait_cadence": "gait_cadence",
+    "gait_step_length": "gait_step_length",
+    "gait_glide_share": "gait_glide_share",
+}
+DATA_GAIT = {
+    "gait_cadence": "data_gait_cadence",
+    "gait_step_length": "data_gait_step_length",
+    "gait_glide_share": "data_gait_glide_share",
+}
 DRIFT = {"drift_y": "drift_y_max_abs", "drift_yaw": "drift_yaw_max_abs"}
 
 Number = float | int | None
@@ -112,8 +128,11 @@ def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
     out: dict[str, Number] = {}
     for model in models:
         rows = select_rows(frame, scenario, False, model=model)
-        for key, column in HEADLINE.items():
+        for key, column in {**HEADLINE, **GAIT}.items():
             out[f"{scenario}.{model}.{key}"] = _median(rows, column)
+    unsteered = select_rows(frame, scenario, False) if len(frame) else frame
+    for key, column in DATA_GAIT.items():
+        out[f"data.{key}"] = _median(unsteered, column)
     featured = pi_models(frame).get(float(params.evaluate.pi_weight)) if len(frame) else None
     label = f"w{weight_label(params.evaluate.pi_weight)}"
     for model, name in ((BASELINE, BASELINE), (featured, label)):

@@ -153,6 +153,29 @@ def _per_model(metrics: dict[str, Any]) -> tuple[list[str], list[list[Any]]]:
     return header, [[model, *(row.get(c) for c in columns)] for model, row in rows.items()]
 
 
+def _gait(metrics: dict[str, Any]) -> str:
+    """The gait per model (`<scenario>.<model>.gait_*`) with the data's level at the commanded
+    speed (`data.gait_*`) as the last row; empty where the key numbers have none."""
+    from pimann.report.key_metrics import DATA_GAIT, GAIT
+
+    rows: dict[str, dict[str, Any]] = {}
+    for key, value in metrics.items():
+        parts = key.split(".")
+        if len(parts) == 3 and parts[2] in GAIT:
+            rows.setdefault(parts[1], {})[parts[2]] = value
+    if not rows:
+        return ""
+    rows["data at the commanded speed"] = {k: metrics.get(f"data.{k}") for k in DATA_GAIT}
+    header = ["model", *(key.removeprefix("gait_").replace("_", " ") for key in GAIT)]
+    return (
+        "<p>The gait over the last seconds of the same test (pimann.evaluate.gait, "
+        "docs/metrics.md): speed along the command over the commanded speed, swings a second "
+        "(both feet), step length (m), the share of time a foot glides near the floor; the last "
+        "row the retargeted data's forward walking near the commanded speed.</p>"
+        + _table(header, [[model, *(row.get(k) for k in GAIT)] for model, row in rows.items()])
+    )
+
+
 def _key_numbers(metrics: dict[str, Any]) -> str:
     from pimann.report.key_metrics import STATUS_CODES
 
@@ -167,6 +190,7 @@ def _key_numbers(metrics: dict[str, Any]) -> str:
         "Walks: the share of seeds that walk; following: the share of motion classes passing "
         "every criterion.</p>"
         + _table(header, rows)
+        + _gait(metrics)
         + "<p>"
         + ", ".join(f"{html.escape(k)} {_cell(v)}" for k, v in others.items())
         + "</p><details><summary>every key number: results/metrics.json (<code>dvc metrics "
