@@ -134,6 +134,8 @@ def test_rollout_and_evaluate_end_to_end(params, tmp_path):
     assert row["gait_cadence"] == pytest.approx(expected["gait_cadence"])  # every row's gait
     assert frame["gait_glide_share"].notna().all() and frame["gait_command_speed"].notna().all()
     assert (frame["data_gait_windows"] == 0).all()  # the data's clips glide, never step
+    assert (frame["data_gait_windows_at_speed"] == 0).all()  # nor at the speeds achieved
+    assert frame["gait_in_data_range"].isna().all()
     names = sorted(p.stem for p in (results / "timeseries").glob("*.csv"))
     assert names == ["base_baseline", "base_pi", "base_pi_steering", "feet_w10"]
     base = pd.read_csv(results / "timeseries" / "base_pi.csv")

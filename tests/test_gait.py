@@ -6,6 +6,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 from builders import CONTACT_PARAMS, EVALUATE_PARAMS, make_trajectory
 
@@ -20,6 +21,7 @@ from pimann.evaluate.gait import (
     last_window,
     swings,
     window_gait,
+    with_data_gait,
 )
 from pimann.evaluate.metrics import trajectory_metrics
 from pimann.generate.command_script import scenario_steps
@@ -216,6 +218,95 @@ def test_the_datas_level_is_the_windows_near_the_speed():
     assert columns[3]["data_gait_windows"] == 0 and columns[3]["data_gait_cadence"] is None
 
 
+# the data's windows by speed (m/s): none within 1e-6 of a band's edge around the speeds below
+BY_SPEED = [
+    {"speed": s, "cadence": c, "step_length": length}
+    for s, c, length in (
+        (0.22, 1.0, 0.20),
+        (0.32, 1.1, 0.26),
+        (0.36, 1.2, 0.30),
+        (0.45, 1.4, 0.34),
+        (0.48, 1.5, 0.36),
+        (0.8, 1.8, 0.45),
+    )
+]
+
+
+def _near(speed: float, band: float = 0.1) -> dict[str, tuple[float, float, float]]:
+    """(median, min, max) of the cadence and step length of `BY_SPEED` within `band` of speed."""
+    near = [w for w in BY_SPEED if abs(w["speed"] - speed) <= band]
+    return {
+        name: (
+            float(np.median([w[name] for w in near])),
+            min(w[name] for w in near),
+            max(w[name] for w in near),
+        )
+        for name in ("cadence", "step_length")
+    }
+
+
+def _at_speed(columns: dict, name: str) -> tuple:
+    return tuple(columns[f"data_gait_{name}_at_speed_{s}"] for s in ("median", "low", "high"))
+
+
+def test_a_rollout_slower_than_commanded_is_judged_at_the_speed_it_achieved():
+    # the scheduled walk (0.32 m x 1.25 steps/s = 0.4 m/s) under a 0.5 m/s command
+    time, heights, positions, base_xy = scheduled_walk()
+    gait, _, window = _gait(time, heights, positions, base_xy)
+    command = command_frames([MotionSegment(duration=10.0, vx=0.5, vy=0.0, yaw_rate=0.0)], time)
+    following = command_following(time, base_xy, np.zeros(FRAMES), command, window)
+    row = {f"gait_{k}": v for k, v in {**gait, **following}.items()}
+    row["gait_command_forward"] = True
+    assert row["gait_speed"] == pytest.approx(0.4) and row["gait_command_speed"] == 0.5
+    (columns,) = data_gait_columns([row], BY_SPEED, 0.1)
+    commanded, achieved = _near(0.5), _near(0.4)
+    assert columns["data_gait_cadence"] == pytest.approx(commanded["cadence"][0])  # 1.45
+    assert _at_speed(columns, "cadence") == pytest.approx(achieved["cadence"])  # 1.3 [1.1, 1.5]
+    assert _at_speed(columns, "step_length") == pytest.approx(achieved["step_length"])
+    assert columns["data_gait_windows_at_speed"] == 4
+    # 1.25 swings/s of 0.32 m: inside [1.1, 1.5] and [0.26, 0.36]
+    assert columns["gait_in_data_range"] is True
+    short = {**row, "gait_step_length": 0.2}  # the same cadence, short steps: out
+    fast = {**row, "gait_cadence": 1.6}
+    no_step = {**row, "gait_step_length": None, "gait_cadence": 0.0}
+    judged = data_gait_columns([short, fast, no_step], BY_SPEED, 0.1)
+    assert [c["gait_in_data_range"] for c in judged] == [False, False, False]
+    assert all(_at_speed(c, "cadence") == _at_speed(columns, "cadence") for c in judged)
+
+
+def test_the_datas_range_is_not_judged_standing_backward_or_away_from_its_windows():
+    row = {"gait_command_forward": True, "gait_command_speed": 0.4, "gait_cadence": 1.0}
+    rows = [
+        {**row, "gait_speed": 0.05, "gait_step_length": 0.05},  # barely moves
+        {**row, "gait_speed": 1.2, "gait_step_length": 0.6},  # no window near 1.2 m/s
+        {**row, "gait_command_forward": False, "gait_speed": 0.4, "gait_step_length": 0.4},
+        {**row, "gait_speed": math.nan, "gait_step_length": 0.3},  # as pandas gives None back
+    ]
+    for columns in data_gait_columns(rows, BY_SPEED, 0.1):
+        assert columns["gait_in_data_range"] is None
+        assert columns["data_gait_cadence_at_speed_median"] is None
+        assert columns["data_gait_windows_at_speed"] == 0
+
+
+def test_the_robot_slid_slower_than_commanded_gets_the_datas_level_at_its_speed(robot):
+    time = np.arange(FRAMES) / RATE
+    xy = np.column_stack([0.3 * time, np.zeros(FRAMES)])  # 0.3 m/s under a 0.4 m/s command
+    script = [MotionSegment(duration=10.0, vx=0.4, vy=0.0, yaw_rate=0.0)]
+    trajectory = make_trajectory(xy, script=script_json(script))
+    metrics = trajectory_metrics(trajectory, robot, EVALUATE_PARAMS, CONTACT_PARAMS)
+    table = {k: [w[k] for w in BY_SPEED] for k in BY_SPEED[0]}
+    frame = with_data_gait(pd.DataFrame([metrics]), {"gait": {"per_window": table}}, 0.1)
+    row = frame.iloc[0]
+    assert row["gait_speed"] == pytest.approx(0.3, rel=1e-6)
+    assert row["data_gait_cadence"] == pytest.approx(_near(0.4)["cadence"][0])
+    achieved = _near(0.3)  # the windows at 0.22, 0.32 and 0.36 m/s
+    assert _at_speed(row, "cadence") == pytest.approx(achieved["cadence"])  # 1.1 [1.0, 1.2]
+    assert _at_speed(row, "step_length") == pytest.approx(achieved["step_length"])
+    assert row["data_gait_windows_at_speed"] == 3
+    judged = row["gait_in_data_range"]
+    assert pd.notna(judged) and not judged  # a glide without a step is not the data's gait
+
+
 def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_path):
     from builders import AGREEING, REFERENCE, SCENARIO, WEIGHTS, crafted_metrics
 
@@ -233,9 +324,18 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
         "data_gait_cadence": dict.fromkeys(WEIGHTS, 1.39),
         "data_gait_step_length": dict.fromkeys(WEIGHTS, 0.284),
     }
+    frame = crafted_metrics(values)
+    # w10's unsteered seeds 0-4: in, in, in, out, not judged; every other row in
+    judged = {0: True, 1: True, 2: True, 3: False, 4: None}
+    frame["gait_in_data_range"] = [
+        judged[row.seed] if row.model == "w10" and not row.steering else True
+        for row in frame.itertuples()
+    ]
     root = tmp_path / "results"
-    write_results(crafted_metrics(values), root, params, provenance(params), {}, REFERENCE)
+    write_results(frame, root, params, provenance(params), {}, REFERENCE)
     metrics = key_metrics(root, params)
+    assert metrics[f"{SCENARIO}.w10.gait_in_data_range"] == pytest.approx(0.75)
+    assert metrics[f"{SCENARIO}.w1.gait_in_data_range"] == 1.0
     assert len(metrics) <= MAX_VALUES
     assert metrics[f"{SCENARIO}.w10.gait_cadence"] == pytest.approx(cadence["w10"])
     assert metrics[f"{SCENARIO}.w10.gait_glide_share"] is None  # not in this metrics.csv
@@ -244,6 +344,9 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
     page = build_report(root, tmp_path / "figures", params, metrics)
     gait = page[page.index("The gait over the last seconds") :]
     assert "data at the commanded speed</td><td>–</td><td>1.39</td><td>0.284</td>" in gait
+    assert "<th>glide share</th><th>in data range</th>" in gait
+    w10 = gait[gait.index("<td>w10</td>") :]
+    assert w10.split("</tr>")[0].endswith("<td>0.75</td>")
 
 
 def test_the_datas_windows_come_from_its_stepping_originals(real_walks, tmp_path):

@@ -3,13 +3,12 @@
 Reads the rollouts (layout: pimann.core.rollout_files) and writes under results/
 (`write_results`):
 metrics.csv (one row per rollout: every pimann.evaluate.metrics value, the gait among them, and
-the data's gait at its commanded speed, pimann.evaluate.gait), metrics_summary.json
-(median,
-IQR, min, max over the seeds; the data's own level of the sliding metrics under
-"data_reference", pimann.evaluate.data_reference), timeseries/*.csv and claims.md
-(pimann.evaluate.claims),
-each with the profile and the params it came from; and the command-following benchmark
-(pimann.evaluate.command_following_benchmark): command_following.csv, .md and .png.
+the data's gait at its commanded and achieved speeds, pimann.evaluate.gait),
+metrics_summary.json (median, IQR, min, max over the seeds; the data's own level of the sliding
+metrics under "data_reference", pimann.evaluate.data_reference), timeseries/*.csv and claims.md
+(pimann.evaluate.claims), each with the profile and the params it came from; and the
+command-following benchmark (pimann.evaluate.command_following_benchmark):
+command_following.csv, .md and .png.
 """
 
 from __future__ import annotations

@@ -37,7 +37,12 @@ from a touchdown to the first touchdown at least `DATA_WINDOW_S` later, so its c
 rounded to whole steps), each window's speed its net planar base displacement over its duration;
 at a speed v, the median (and range) of the windows within `evaluate.gait_speed_band` of v. A
 rollout commanded forward gets the data's level at its commanded speed beside its own
-(`data_gait_*` columns of metrics.csv, `with_data_gait`).
+(`data_gait_*` columns of metrics.csv, `with_data_gait`), and at the speed it achieved
+(`gait_speed`) the data's cadence and step length, median and range
+(`data_gait_<measure>_at_speed_{median,low,high}`, `AT_SPEED`): `gait_in_data_range` says
+whether its cadence and step length both lie inside the data's range at that speed (None where
+its achieved speed is under `STANDING_SPEED` or no data window is near), so a rollout walking
+slower than commanded is judged against the data's gait at its own speed.
 """
 
 from __future__ import annotations
@@ -70,10 +75,16 @@ MEASURES = (
     "glide_share",
     "contact_sole_pitch",
 )
+# the measures whose data range at the rollout's achieved speed judges its gait
+# (`data_gait_<name>_at_speed_{median,low,high}`, `gait_in_data_range`)
+AT_SPEED = ("cadence", "step_length")
 FORWARD = CLASSES.index("forward")
 # the gait columns summarised over seeds in metrics_summary.json (metrics.csv keeps them all)
-GAIT_SUMMARY = [f"gait_{name}" for name in ("speed_ratio", "heading_change", *MEASURES)] + [
-    f"data_gait_{name}" for name in ("cadence", "step_length")
+GAIT_SUMMARY = [
+    *(f"gait_{name}" for name in ("speed_ratio", "heading_change", *MEASURES)),
+    *(f"data_gait_{name}" for name in ("cadence", "step_length")),
+    *(f"data_gait_{name}_at_speed_median" for name in AT_SPEED),
+    "gait_in_data_range",
 ]
 
 
@@ -373,12 +384,62 @@ def windows_of(reference: dict[str, Any] | None) -> list[dict[str, Any]]:
     return [dict(zip(table, values, strict=True)) for values in zip(*table.values(), strict=True)]
 
 
+def _finite(value: Any) -> float | None:
+    """A finite float, or None (missing, None or NaN, as pandas gives them back)."""
+    if value is None:
+        return None
+    value = float(value)
+    return value if math.isfinite(value) else None
+
+
+def at_achieved_speed(
+    row: dict[str, Any], windows: Sequence[dict[str, Any]], band: float
+) -> dict[str, Any]:
+    """The data's cadence and step length at the speed a rollout achieved (`gait_speed`, along
+    its forward command): `data_gait_<measure>_at_speed_{median,low,high}` (median, min and max
+    of the windows within `band`), `data_gait_windows_at_speed`, and `gait_in_data_range`:
+    True where the rollout's cadence and step length both lie inside [low, high] (a rollout
+    without a counted swing has no step length: False), None where it is not commanded forward,
+    achieves under `STANDING_SPEED` along the command, or no window is near."""
+    columns: dict[str, Any] = {
+        f"data_gait_{name}_at_speed_{stat}": None
+        for name in AT_SPEED
+        for stat in ("median", "low", "high")
+    }
+    columns["data_gait_windows_at_speed"] = 0
+    columns["gait_in_data_range"] = None
+    speed = _finite(row.get("gait_speed"))
+    if row.get("gait_command_forward") not in (True, 1) or speed is None:
+        return columns
+    if speed < STANDING_SPEED:
+        return columns
+    level = gait_level(windows, speed, band)
+    columns["data_gait_windows_at_speed"] = level["cadence"]["n"]
+    inside = []
+    for name in AT_SPEED:
+        median, low, high = (level[name][k] for k in ("median", "min", "max"))
+        columns.update(
+            {
+                f"data_gait_{name}_at_speed_median": median,
+                f"data_gait_{name}_at_speed_low": low,
+                f"data_gait_{name}_at_speed_high": high,
+            }
+        )
+        if low is None:
+            return columns
+        own = _finite(row.get(f"gait_{name}"))
+        inside.append(own is not None and low - 1e-9 <= own <= high + 1e-9)
+    columns["gait_in_data_range"] = all(inside)
+    return columns
+
+
 def data_gait_columns(
     rows: Sequence[dict[str, Any]], windows: Sequence[dict[str, Any]], band: float
 ) -> list[dict[str, Any]]:
     """Per metrics.csv row, the data's level at its commanded speed: `data_gait_<measure>`
     (median of the windows within `band`) and `data_gait_windows`; None where the command is
-    not forward walking or no window is near."""
+    not forward walking or no window is near. Then the data's level at its achieved speed and
+    whether its gait lies inside it (`at_achieved_speed`)."""
     out = []
     for row in rows:
         speed, forward = row.get("gait_command_speed"), row.get("gait_command_forward")
@@ -388,6 +449,7 @@ def data_gait_columns(
             level = gait_level(windows, float(speed), band)
             columns.update({f"data_gait_{n}": level[n]["median"] for n in MEASURES})
             columns["data_gait_windows"] = level["cadence"]["n"]
+        columns.update(at_achieved_speed(row, windows, band))
         out.append(columns)
     return out
 
@@ -395,8 +457,8 @@ def data_gait_columns(
 def with_data_gait(
     frame: pd.DataFrame, reference: dict[str, Any] | None, band: float
 ) -> pd.DataFrame:
-    """metrics.csv's rows with the data's level at each commanded speed (`data_gait_columns`)
-    from the data reference's `gait` record beside them."""
+    """metrics.csv's rows with the data's level at each commanded and achieved speed
+    (`data_gait_columns`) from the data reference's `gait` record beside them."""
     windows = windows_of((reference or {}).get("gait"))
     columns = data_gait_columns(frame.to_dict("records"), windows, band)
     return pd.concat([frame, pd.DataFrame(columns, index=frame.index)], axis=1)

@@ -16,7 +16,9 @@ and stable from run to run (a value that cannot be had is null):
   base drift (max |y|, max |yaw|) of the baseline and the featured PI model
   (evaluate.pi_weight), unsteered and steered;
 - `<scenario>.<model>.gait_*` (`GAIT`): the gait's medians over the seeds, unsteered (speed
-  over the commanded one, cadence, step length, glide share; pimann.evaluate.gait);
+  over the commanded one, cadence, step length, glide share; pimann.evaluate.gait), and
+  `gait_in_data_range` (`GAIT_SHARES`): the share of the seeds whose cadence and step length lie
+  inside the data's range at the speed they achieved (of those where it can be judged);
 - `data.sliding_*`: the retargeted data's own level of each sliding measure; `data.gait_*`
   (`DATA_GAIT`): the data's gait at the scenario's commanded speed;
 - `following.<model>.<steering>`: the share of motion classes whose every criterion passes
@@ -83,6 +85,8 @@ GAIT = {
     "gait_step_length": "gait_step_length",
     "gait_glide_share": "gait_glide_share",
 }
+# the share of the seeds (where defined) per model, unsteered, on the scenario
+GAIT_SHARES = {"gait_in_data_range": "gait_in_data_range"}
 DATA_GAIT = {
     "gait_cadence": "data_gait_cadence",
     "gait_step_length": "data_gait_step_length",
@@ -109,6 +113,14 @@ def _median(rows: pd.DataFrame, column: str) -> Number:
     return _number(values.median()) if len(values) else None
 
 
+def _share(rows: pd.DataFrame, column: str) -> Number:
+    """The mean of a boolean column over the rows where it is defined (None: none is)."""
+    if column not in rows:
+        return None
+    values = rows[column].map({True: 1.0, False: 0.0, "True": 1.0, "False": 0.0}).dropna()
+    return _number(values.mean()) if len(values) else None
+
+
 def claim_metrics(statuses: dict[str, str]) -> dict[str, Number]:
     """`claims.holding`, `claims.total` and each claim's status code, from {id: status}."""
     out: dict[str, Number] = {
@@ -130,6 +142,8 @@ def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
         rows = select_rows(frame, scenario, False, model=model)
         for key, column in {**HEADLINE, **GAIT}.items():
             out[f"{scenario}.{model}.{key}"] = _median(rows, column)
+        for key, column in GAIT_SHARES.items():
+            out[f"{scenario}.{model}.{key}"] = _share(rows, column)
     unsteered = select_rows(frame, scenario, False) if len(frame) else frame
     for key, column in DATA_GAIT.items():
         out[f"data.{key}"] = _median(unsteered, column)

@@ -156,23 +156,26 @@ def _per_model(metrics: dict[str, Any]) -> tuple[list[str], list[list[Any]]]:
 def _gait(metrics: dict[str, Any]) -> str:
     """The gait per model (`<scenario>.<model>.gait_*`) with the data's level at the commanded
     speed (`data.gait_*`) as the last row; empty where the key numbers have none."""
-    from pimann.report.key_metrics import DATA_GAIT, GAIT
+    from pimann.report.key_metrics import DATA_GAIT, GAIT, GAIT_SHARES
 
+    keys = [*GAIT, *GAIT_SHARES]
     rows: dict[str, dict[str, Any]] = {}
     for key, value in metrics.items():
         parts = key.split(".")
-        if len(parts) == 3 and parts[2] in GAIT:
+        if len(parts) == 3 and parts[2] in keys:
             rows.setdefault(parts[1], {})[parts[2]] = value
     if not rows:
         return ""
     rows["data at the commanded speed"] = {k: metrics.get(f"data.{k}") for k in DATA_GAIT}
-    header = ["model", *(key.removeprefix("gait_").replace("_", " ") for key in GAIT)]
+    header = ["model", *(key.removeprefix("gait_").replace("_", " ") for key in keys)]
     return (
         "<p>The gait over the last seconds of the same test (pimann.evaluate.gait, "
         "docs/metrics.md): speed along the command over the commanded speed, swings a second "
-        "(both feet), step length (m), the share of time a foot glides near the floor; the last "
-        "row the retargeted data's forward walking near the commanded speed.</p>"
-        + _table(header, [[model, *(row.get(k) for k in GAIT)] for model, row in rows.items()])
+        "(both feet), step length (m), the share of time a foot glides near the floor, the "
+        "share of seeds whose cadence and step length both lie inside the data's range at the "
+        "speed they achieved; the last row the retargeted data's forward walking near the "
+        "commanded speed.</p>"
+        + _table(header, [[model, *(row.get(k) for k in keys)] for model, row in rows.items()])
     )
 
 
