@@ -3,6 +3,7 @@ the robot slid along the floor, and on a real retargeted walk against another co
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -311,6 +312,7 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
     from builders import AGREEING, REFERENCE, SCENARIO, WEIGHTS, crafted_metrics
 
     from pimann.core.params import load_params
+    from pimann.core.rollout_files import STEERING_LABEL
     from pimann.evaluate.evaluation import provenance, write_results
     from pimann.report.key_metrics import MAX_VALUES, key_metrics
     from pimann.report.page import build_report
@@ -325,8 +327,8 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
         "data_gait_step_length": dict.fromkeys(WEIGHTS, 0.284),
     }
     frame = crafted_metrics(values)
-    # w10's unsteered seeds 0-4: in, in, in, out, not judged; every other row in
-    judged = {0: True, 1: True, 2: True, 3: False, 4: None}
+    # w10's unsteered seeds 0-4: not judged, in, in, out, in; every other row in
+    judged = {0: None, 1: True, 2: True, 3: False, 4: True}
     frame["gait_in_data_range"] = [
         judged[row.seed] if row.model == "w10" and not row.steering else True
         for row in frame.itertuples()
@@ -336,6 +338,9 @@ def test_the_key_numbers_and_the_page_carry_the_gait_and_the_datas_level(tmp_pat
     metrics = key_metrics(root, params)
     assert metrics[f"{SCENARIO}.w10.gait_in_data_range"] == pytest.approx(0.75)
     assert metrics[f"{SCENARIO}.w1.gait_in_data_range"] == 1.0
+    summary = json.loads((root / "metrics_summary.json").read_text())["summary"]
+    seeds = summary[SCENARIO][STEERING_LABEL[False]]["w10"]["metrics"]["gait_in_data_range"]
+    assert seeds["n"] == 4 and seeds["mean"] == pytest.approx(0.75)
     assert len(metrics) <= MAX_VALUES
     assert metrics[f"{SCENARIO}.w10.gait_cadence"] == pytest.approx(cadence["w10"])
     assert metrics[f"{SCENARIO}.w10.gait_glide_share"] is None  # not in this metrics.csv

@@ -425,6 +425,7 @@ def test_aggregate_over_seeds():
     )
     assert summary["rmse"]["min"] == 1.0 and summary["rmse"]["max"] == 10.0
     assert summary["walks"]["mean"] == pytest.approx(0.6)
+    assert summary["maybe"]["n"] == 4  # None in the first run: the other four
     assert aggregate(list(runs.values())) == summary
 
 

@@ -397,7 +397,8 @@ def aggregate(
     None in some runs are summarised over the others (`n` says how many).
     """
     dicts = list(runs.values()) if isinstance(runs, Mapping) else list(runs)
-    keys = [k for k in dicts[0] if isinstance(dicts[0][k], int | float | bool)] if dicts else []
+    numeric = int | float | bool  # a metric None in the first run still counts from the others
+    keys = list(dict.fromkeys(k for d in dicts for k, v in d.items() if isinstance(v, numeric)))
     summary: dict[str, dict[str, float | int | None]] = {}
     for key in keys:
         values = np.array(
