@@ -38,7 +38,7 @@ import torch
 
 from pimann.core.errors import PimannError
 from pimann.core.params import load_params
-from pimann.core.paths import REPO_ROOT
+from pimann.core.paths import REPO_ROOT, repo_path
 from pimann.core.robot import LEG_JOINTS
 from pimann.core.trajectory import iter_collection
 from pimann.learn.dataset import read_dataset
@@ -199,7 +199,7 @@ def class_response(models_dir: Path, collection: Path, samples: int) -> pd.DataF
     height = load_params().contacts.on_height
     for seed, folder in model_seeds(models_dir).items():
         model, layout, stats, meta = load_model(folder)
-        dataset_path = Path(meta["dataset"])
+        dataset_path = repo_path(meta["dataset"])
         if str(dataset_path) not in cache:
             dataset = read_dataset(dataset_path)
             take = np.linspace(0, len(dataset.x_train) - 1, min(samples, len(dataset.x_train)))

@@ -13,6 +13,7 @@ from builders import CONTACT_PARAMS, RATE, SMALL_MODEL, synthetic_collection
 from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, ProtocolParams, load_params
+from pimann.core.paths import repo_path, repo_relative
 from pimann.core.robot import CHEST_FRAME, STANDING_JOINTS
 from pimann.core.rollout_files import read_script, script_json
 from pimann.core.trajectory import Trajectory, read_trajectory
@@ -165,6 +166,8 @@ def test_training_writes_models_a_seed_reproduces(trained, small_params, tmp_pat
     model, layout, stats, meta = load_adherent_model(models / "1")
     assert layout == LAYOUT and meta["variant"] == "adherent" and meta["pi_weight"] == 0.0
     assert meta["best_epoch"] in (1, 2) and meta["train_samples"] > 100
+    assert meta["dataset"] == repo_relative(dataset)  # (absolute here: outside the repository)
+    assert repo_path(meta["dataset"]).samefile(dataset)
     assert (models.parent / "plots" / "seed0.csv").read_text().startswith("epoch,train_loss")
     train_adherent(dataset, tmp_path / "alone", [1], small_params)
     alone, *_ = load_adherent_model(tmp_path / "alone" / "1")

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from pimann.core.paths import PACKAGE_CHECKOUT, SHARED_ENV, project_root, shared_dir
 
 
@@ -29,3 +31,21 @@ def test_repo_relative_paths(tmp_path):
 
     assert repo_relative(REPO_ROOT / "models" / "w10" / "0") == "models/w10/0"
     assert repo_relative(tmp_path / "x.h5") == str((tmp_path / "x.h5").resolve())
+
+
+def test_repo_relative_keeps_a_linked_folder_relative_and_repo_path_reads_it_back(tmp_path):
+    """A checkout's data/ may be a link to elsewhere: recorded by its spelling, the path is
+    the same in every checkout; repo_path opens it against REPO_ROOT."""
+    import tempfile
+
+    from pimann.core.paths import REPO_ROOT, repo_path, repo_relative
+
+    (tmp_path / "full.h5").write_text("x")
+    with tempfile.TemporaryDirectory(dir=REPO_ROOT) as inside:
+        link = Path(inside) / "data"
+        link.symlink_to(tmp_path)
+        recorded = repo_relative(link / "full.h5")
+        assert recorded == f"{Path(inside).name}/data/full.h5"
+        assert repo_path(recorded).read_text() == "x"
+    assert repo_path("/abs/x.h5") == Path("/abs/x.h5")
+    assert repo_path("models/w10") == REPO_ROOT / "models" / "w10"

@@ -276,3 +276,30 @@ def test_precision_auto_follows_the_cpu_flags(tmp_path):
     assert pick_precision("auto", cpu) == ("bfloat16" if cpu_has_bf16() else "float32")
     assert pick_precision("float32", cpu) == "float32"
     assert pick_precision("bfloat16", cpu) == "bfloat16"
+
+
+def test_meta_records_the_dataset_relative_to_the_repository(tmp_path, params, dataset_path):
+    """A model's meta names its dataset relative to REPO_ROOT, so two checkouts of the same
+    code and data write the same meta.json (the same DVC hash of models/); read back
+    against REPO_ROOT it is the file trained on."""
+    import tempfile
+
+    from pimann.core.paths import REPO_ROOT, repo_path
+
+    params = dataclasses.replace(params, train=dataclasses.replace(params.train, epochs=1))
+    with tempfile.TemporaryDirectory(dir=REPO_ROOT) as inside:
+        inside = Path(inside)
+        shutil.copy(dataset_path, inside / "full.h5")
+        (inside / "linked").symlink_to(dataset_path.parent)  # as a checkout's linked data/
+        for name, path in (("copied", inside / "full.h5"), ("linked", inside / "linked/full.h5")):
+            metas = train_models(path, tmp_path / name, 0.0, [0], params, "cpu")
+            recorded = metas[0]["dataset"]
+            assert recorded == str(path.relative_to(REPO_ROOT)), recorded
+            assert not Path(recorded).is_absolute()
+            assert repo_path(recorded).samefile(path)
+            meta = json.loads((tmp_path / name / "0" / "meta.json").read_text())
+            assert meta["dataset"] == recorded
+    # outside the repository it stays absolute (nothing to be relative to)
+    outside = train_models(dataset_path, tmp_path / "out", 0.0, [0], params, "cpu")
+    assert outside[0]["dataset"] == str(dataset_path.resolve())
+    assert repo_path(outside[0]["dataset"]) == dataset_path.resolve()

@@ -71,6 +71,17 @@ def bandai_label_files(bvh: Path) -> tuple[Path, Path, Path]:
 
 def repo_relative(path: str | Path) -> str:
     """A path as results record it: relative to the repository when inside it (a run's files
-    read the same on every machine), else absolute."""
-    path = Path(path).resolve()
-    return str(path.relative_to(REPO_ROOT)) if path.is_relative_to(REPO_ROOT) else str(path)
+    read the same on every machine, and hash the same in two checkouts), else absolute.
+
+    Inside the repository by its spelling (a linked folder such as data/ stays relative)
+    or, failing that, by its resolved location."""
+    for candidate in (Path(os.path.abspath(path)), Path(path).resolve()):
+        if candidate.is_relative_to(REPO_ROOT):
+            return str(candidate.relative_to(REPO_ROOT))
+    return str(Path(path).resolve())
+
+
+def repo_path(recorded: str | Path) -> Path:
+    """A path `repo_relative` recorded, as a path to open: a relative one is under REPO_ROOT."""
+    recorded = Path(recorded)
+    return recorded if recorded.is_absolute() else REPO_ROOT / recorded

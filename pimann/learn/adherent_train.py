@@ -24,6 +24,7 @@ import torch
 from pimann.core.atomic import atomic_path
 from pimann.core.errors import PimannError, about
 from pimann.core.params import ModelParams, Params, as_dict
+from pimann.core.paths import repo_relative
 from pimann.core.progress import Progress
 from pimann.learn.adherent import AdherentLayout, read_adherent_dataset
 from pimann.learn.epochs import epoch_order, epoch_seed, schedule_factor
@@ -157,7 +158,7 @@ def train_adherent(
                 "precision": "float32",
                 "train_samples": n,
                 "test_samples": len(x_test),
-                "dataset": str(dataset_path),
+                "dataset": repo_relative(dataset_path),  # the same in every checkout
                 "train_clips": data.train_clips,
                 "test_clips": data.test_clips,
                 "standing": data.standing,

@@ -44,6 +44,7 @@ from pimann.core.atomic import atomic_path
 from pimann.core.errors import PimannError
 from pimann.core.parallel import cpu_workers, pool_map, training_threads
 from pimann.core.params import Params, as_dict
+from pimann.core.paths import repo_relative
 from pimann.core.progress import Progress
 from pimann.core.stage_times import note
 from pimann.learn.dataset import FeatureDataset, read_dataset
@@ -460,7 +461,7 @@ def write_models(
                 "precision": precision,
                 "train_samples": train_samples,
                 "test_samples": len(data.x_test),
-                "dataset": str(dataset_path),
+                "dataset": repo_relative(dataset_path),  # the same in every checkout
                 "train_clips": data.train_clips,
                 "test_clips": data.test_clips,
                 "standing": data.standing,
