@@ -133,3 +133,19 @@ def test_top_level_plots_name_their_axes():
         assert isinstance(spec["y"], dict) and spec["y"], title  # file: column(s)
         for path in spec["y"]:
             assert path.startswith("results/"), (title, path)
+
+
+def test_walks_is_the_share_of_the_seeds_not_their_median(params, results, tmp_path):
+    """Two of three seeds walking is 2/3, where a median would say 1."""
+    import shutil
+
+    import pandas as pd
+
+    crafted = shutil.copytree(results, tmp_path / "results")
+    frame = read_metrics(crafted / "metrics.csv")
+    w10 = (frame["model"] == "w10") & (frame["scenario"] == SCENARIO) & ~frame["steering"]
+    first = frame[w10].iloc[[0]].assign(walks=True)
+    more = first.iloc[[0, 0]].assign(seed=[90, 91], walks=[True, False])
+    frame = pd.concat([frame[~w10], first, more], ignore_index=True)
+    frame.to_csv(crafted / "metrics.csv", index=False)
+    assert key_metrics(crafted, params)[f"{SCENARIO}.w10.walks"] == pytest.approx(2 / 3, abs=1e-3)

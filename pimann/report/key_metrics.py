@@ -77,6 +77,7 @@ HEADLINE = {  # key: metrics.csv column, medians per model on the scenario, unst
     "walks": "walks",
 }
 SLIDING_KEYS = [key for key in HEADLINE if key.startswith("sliding_")]
+SHARES = {"walks"}  # headline keys that are the share of the seeds, not their median
 # the gait (pimann.evaluate.gait) per model, medians over the seeds, unsteered, on the scenario;
 # `data.<key>` the data's level at the scenario's commanded speed (its `data_gait_*` columns)
 GAIT = {
@@ -141,7 +142,8 @@ def rollout_metrics(frame: pd.DataFrame, params: Params) -> dict[str, Number]:
     for model in models:
         rows = select_rows(frame, scenario, False, model=model)
         for key, column in {**HEADLINE, **GAIT}.items():
-            out[f"{scenario}.{model}.{key}"] = _median(rows, column)
+            summary = _share if key in SHARES else _median
+            out[f"{scenario}.{model}.{key}"] = summary(rows, column)
         for key, column in GAIT_SHARES.items():
             out[f"{scenario}.{model}.{key}"] = _share(rows, column)
     unsteered = select_rows(frame, scenario, False) if len(frame) else frame
