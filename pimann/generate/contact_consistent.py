@@ -1,0 +1,329 @@
+"""Contact-consistent trajectories: a foot in contact stays where it landed (docs/consistent.md).
+
+The network's feet glide at the position level while the contact rule says they are down. A
+contact-consistent trajectory holds each sole at its touchdown pose while it is in contact
+(the study's rule, pimann.core.contacts, on the lowest corner of the trajectory's own sole,
+with `contacts` params): the sole origin's horizontal position and yaw at touchdown, the
+sole flat (roll = pitch = 0) with its origin on the floor (z = 0). Each leg's 6 joints are
+re-solved so that the sole reaches its target; the base pose, the upper body and a foot in
+swing stay the network's. A hold weight per foot rises by 1 / n a frame while the foot is in
+contact and falls by 1 / n a frame while it is not (n = `blend_s` in frames), and the target is
+the raw sole pose moved that far towards the held one: touchdown and lift-off blend over n
+frames, no joint jumps, and a foot that leaves the floor for less than n frames keeps its hold.
+
+The legs are solved together for every frame (or every rollout of a batch) at once: damped
+Gauss-Newton on the sole's 6D error (position, and the vee of the rotation error's skew
+part), warm-started from the network's joints of the same frame, Jacobians by finite
+differences of the numpy leg chains (pimann.generate.leg_odometry.SoleFrames, pinocchio's
+geometry), joint limits by clipping. A frame still beyond `tolerance` after `iterations` gets up
+to `EXTRA_ITERATIONS` more; what remains is reported (`residual`), never hidden.
+
+Joint velocities of the output: the file's own plus the change of the correction per frame,
+sdot = sdot_raw + (dq_k - dq_{k-1}) / dt with dq = q - q_raw. Where the network's velocities
+agree with its positions they agree with the new ones too, and a joint the correction leaves
+alone (the upper body, a leg in swing) keeps the network's velocity exactly.
+
+Two ways: `make_consistent` post-processes a finished trajectory (every frame at once);
+`SoleHolder` does one step of a batch of rollouts, which the batched generator applies inside
+its loop (pimann.generate.batch_generator, `consistent`) so that the network sees the held legs.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from pimann.core.contacts import contacts_from_heights, frame_period
+from pimann.core.params import ConsistentParams, ContactParams
+from pimann.core.robot import LEG_JOINTS, SOLE_CORNERS, Robot
+from pimann.core.rotations import quaternion_xyzw_matrices, rot_z, skew_part, vee, yaw_of
+from pimann.core.trajectory import Trajectory
+from pimann.generate.leg_odometry import SoleFrames
+
+VARIANTS = ("post", "loop")  # the contact-consistent rollout variants beside the raw one
+FD_STEP = 1e-7  # rad: finite-difference step of the leg Jacobian (error ~1e-7 of a column)
+# Gauss-Newton iterations beyond `iterations` for the frames whose held sole is still farther
+# than `tolerance` from its target (a long stance far from the network's foot); cheap, since
+# they run on those frames only
+EXTRA_ITERATIONS = 20
+# a foot whose network sole's lowest corner is below this share of the rule's off height is
+# held flat on the floor; above it the hold lets it rise, to the network's own height at the
+# off height (a lift-off the rule sees when the network's foot does)
+FLAT_SHARE = 0.5
+LEGS = np.array(LEG_JOINTS).reshape(2, 6)  # study joints of the left and the right leg
+_CORNERS = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homogeneous
+
+
+def blend_frames(params: ConsistentParams, dt: float) -> int:
+    """Frames over which a touchdown or a lift-off blends (at least 1: a switch in a frame)."""
+    return max(1, int(round(params.blend_s / dt)))
+
+
+def homogeneous(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) placements from positions (..., 3) and rotations (..., 3, 3)."""
+    out = np.zeros((*position.shape[:-1], 4, 4))
+    out[..., :3, :3], out[..., :3, 3], out[..., 3, 3] = rotation, position, 1.0
+    return out
+
+
+def inverse(placement: np.ndarray) -> np.ndarray:
+    """(..., 4, 4) inverses of rigid placements."""
+    rotation_t = np.swapaxes(placement[..., :3, :3], -1, -2)
+    return homogeneous(-(rotation_t @ placement[..., :3, 3:])[..., 0], rotation_t)
+
+
+def flat_on_floor(placement: np.ndarray) -> np.ndarray:
+    """The held pose of soles (..., 4, 4): origin's x, y and the yaw kept, flat, z = 0."""
+    position = placement[..., :3, 3].copy()
+    position[..., 2] = 0.0
+    return homogeneous(position, rot_z(yaw_of(placement[..., :3, :3])))
+
+
+def interpolate(start: np.ndarray, end: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Placements (..., 4, 4) a fraction `weight` (...) of the way from `start` to `end`
+    (position linearly, rotation along the geodesic)."""
+    w = np.asarray(weight, dtype=float)
+    position = (1 - w[..., None]) * start[..., :3, 3] + w[..., None] * end[..., :3, 3]
+    relative = np.swapaxes(start[..., :3, :3], -1, -2) @ end[..., :3, :3]
+    shape = relative.shape[:-2]
+    rotvec = Rotation.from_matrix(relative.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
+    step = Rotation.from_rotvec((w[..., None] * rotvec).reshape(-1, 3)).as_matrix()
+    rotation = start[..., :3, :3] @ step.reshape(*shape, 3, 3)
+    return homogeneous(position, rotation)
+
+
+def corner_distance(placement: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """(...) the largest distance between a sole's corners at `placement` and at `target`."""
+    gap = (placement - target)[..., :3, :] @ _CORNERS  # (..., 3, C)
+    return np.sqrt((gap * gap).sum(axis=-2)).max(axis=-1)
+
+
+@dataclasses.dataclass
+class LegSolution:
+    joints: np.ndarray  # (B, 26) the joints with the legs re-solved
+    residual: np.ndarray  # (B, 2) m, each sole's largest corner distance from its target
+    iterations: int  # Gauss-Newton iterations run (the most any frame needed)
+
+
+class LegSolver:
+    """Both legs' joints for sole targets in the base frame, every row (frame, rollout) at once."""
+
+    def __init__(self, robot: Robot, params: ConsistentParams):
+        self.frames = SoleFrames(robot)
+        self.params = params
+        self.lower = robot.joint_lower[LEGS]
+        self.upper = robot.joint_upper[LEGS]
+
+    def soles(self, joints: np.ndarray) -> np.ndarray:
+        """(B, 2, 4, 4) both soles in the base frame."""
+        return self.frames.transforms(joints)
+
+    def _error(self, joints: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """(B, 2, 6) position error, then the rotation error's vee(skew(R_t^T R))."""
+        soles = self.soles(joints)
+        out = np.empty((*soles.shape[:2], 6))
+        out[..., :3] = soles[..., :3, 3] - targets[..., :3, 3]
+        relative = np.swapaxes(targets[..., :3, :3], -1, -2) @ soles[..., :3, :3]
+        out[..., 3:] = vee(skew_part(relative))
+        return out
+
+    def _cost(self, joints: np.ndarray, targets: np.ndarray, active: np.ndarray) -> tuple:
+        """(error (B, 2, 6), cost (B, 2): its squared norm, 0 for an inactive leg)."""
+        error = self._error(joints, targets)
+        return error, np.where(active, (error * error).sum(axis=-1), 0.0)
+
+    def _iterate(
+        self,
+        joints: np.ndarray,
+        targets: np.ndarray,
+        active: np.ndarray,
+        error: np.ndarray,
+        cost: np.ndarray,
+        damping: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """One damped Gauss-Newton step of the active legs, in place, kept only where it
+        lowers the leg's error (else its damping grows tenfold: Levenberg-Marquardt, which a
+        straight knee at its limit needs); returns the new (error, cost)."""
+        jacobian = np.empty((*error.shape, 6))  # (B, 2, 6 errors, 6 joints)
+        for j in range(6):
+            moved = joints.copy()
+            moved[:, LEGS[:, j]] += FD_STEP
+            jacobian[..., j] = (self._error(moved, targets) - error) / FD_STEP
+        jacobian_t = np.swapaxes(jacobian, -1, -2)
+        normal = jacobian_t @ jacobian + damping[..., None, None] * np.eye(6)
+        step = np.linalg.solve(normal, -(jacobian_t @ error[..., None]))[..., 0]
+        trial = joints.copy()
+        legs = joints[:, LEGS]
+        # within the limits; a joint the network put beyond one may not go farther
+        lower, upper = np.minimum(self.lower, legs), np.maximum(self.upper, legs)
+        legs = legs + np.where(active[..., None], step, 0.0)
+        trial[:, LEGS] = np.clip(legs, lower, upper)
+        trial_error, trial_cost = self._cost(trial, targets, active)
+        better = active & (trial_cost < cost)
+        joints[:, LEGS] = np.where(better[..., None], trial[:, LEGS], joints[:, LEGS])
+        damping[:] = np.where(better, np.maximum(damping / 10, self.params.damping), damping * 10)
+        error = np.where(better[..., None], trial_error, error)
+        return error, np.where(better, trial_cost, cost)
+
+    def solve(self, joints: np.ndarray, targets: np.ndarray, active: np.ndarray) -> LegSolution:
+        """Legs of `active` (B, 2) re-solved from `joints` (B, 26) towards `targets` (B, 2, 4, 4,
+        base frame); the other legs and every other joint unchanged."""
+        joints = np.array(joints, dtype=float)
+        rows = np.flatnonzero(active.any(axis=1))
+        residual = np.zeros(active.shape)
+        if not len(rows):
+            return LegSolution(joints, residual, 0)
+        part, goal, on = joints[rows], targets[rows], active[rows]
+        error, cost = self._cost(part, goal, on)
+        damping = np.full(on.shape, float(self.params.damping))
+        done = 0
+        for done in range(1, self.params.iterations + EXTRA_ITERATIONS + 1):
+            error, cost = self._iterate(part, goal, on, error, cost, damping)
+            if done >= self.params.iterations:
+                gap = np.where(on, corner_distance(self.soles(part), goal), 0.0)
+                on = on & (gap > self.params.tolerance)
+                if not on.any():
+                    break
+        joints[rows] = part
+        residual[rows] = np.where(active[rows], corner_distance(self.soles(part), goal), 0.0)
+        return LegSolution(joints, residual, done)
+
+
+class SoleHolder:
+    """The hold of each foot of B rows, frame after frame: two weights and the held pose.
+
+    The horizontal weight (the sole origin's x, y and the yaw) rises by 1 / n a frame while
+    the rule says contact and falls by 1 / n once it says swing. The vertical weight (height
+    and tilt: flat on the floor) is the horizontal one while the network's lowest corner h is
+    below `FLAT_SHARE` x the off height, falling linearly to 0 at the off height: a foot on
+    the floor is flat on it, and as the network's foot rises to the rule's off height ours
+    rises with it (at the off height, to the network's height exactly), so the rule sees the
+    same lift-off and the foot returns to the network's path horizontally in the air, where
+    no contact is counted.
+    """
+
+    def __init__(
+        self, rows: int, params: ConsistentParams, contact_params: ContactParams, dt: float
+    ):
+        self.rate = 1.0 / blend_frames(params, dt)
+        self.off_height = float(contact_params.off_height)
+        self.ramp = np.zeros((rows, 2))  # the horizontal weight per foot
+        self.held = np.zeros((rows, 2, 3))  # held x, y and yaw per foot
+
+    def advance(self, soles: np.ndarray, contacts: np.ndarray) -> np.ndarray:
+        """Weights (B, 2, 2: horizontal, vertical) after a frame with world soles (B, 2, 4, 4)
+        and contacts (B, 2); a foot that touches down with no hold left takes its sole's x, y
+        and yaw."""
+        landing = contacts & (self.ramp <= 0.0)
+        if landing.any():
+            self.held[landing, :2] = soles[landing, :2, 3]
+            self.held[landing, 2] = yaw_of(soles[landing, :3, :3])
+        self.ramp = np.clip(self.ramp + np.where(contacts, self.rate, -self.rate), 0.0, 1.0)
+        low = (self.off_height - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * self.off_height)
+        low = np.clip(low, 0.0, 1.0)
+        return np.stack([self.ramp, self.ramp * low], axis=-1)
+
+    def step(self, soles: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(targets (B, 2, 4, 4) world, weights (B, 2, 2)) of one frame."""
+        weight = self.advance(soles, contacts)
+        return hold_targets(soles, self.held, weight), weight
+
+
+def hold_targets(soles: np.ndarray, held: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Sole targets (..., 4, 4): the network's soles moved by the horizontal weight towards the
+    held x, y, yaw and by the vertical weight towards flat on the floor (z = 0)."""
+    horizontal, vertical = weight[..., 0], weight[..., 1]
+    rotation = soles[..., :3, :3]
+    yaw = yaw_of(rotation)
+    turn = np.arctan2(np.sin(held[..., 2] - yaw), np.cos(held[..., 2] - yaw))
+    tilt = np.swapaxes(rot_z(yaw), -1, -2) @ rotation  # R = Rz(yaw) tilt
+    flat = np.broadcast_to(np.eye(4), tilt.shape[:-2] + (4, 4))
+    tilt = interpolate(homogeneous(np.zeros(tilt.shape[:-2] + (3,)), tilt), flat, vertical)
+    position = soles[..., :3, 3].copy()
+    position[..., :2] += horizontal[..., None] * (held[..., :2] - position[..., :2])
+    position[..., 2] *= 1.0 - vertical
+    return homogeneous(position, rot_z(yaw + horizontal * turn) @ tilt[..., :3, :3])
+
+
+def rollout_contacts(heights: np.ndarray, dt: float, params: ContactParams) -> np.ndarray:
+    """(T, 2) the contact rule on lowest-corner heights as the generator runs it: both feet
+    down at the start (a rollout starts standing)."""
+    flags = contacts_from_heights(heights, dt, params, initial=True)
+    flags[0] = True
+    return flags
+
+
+def lowest_heights(soles: np.ndarray) -> np.ndarray:
+    """(..., 2) lowest corner height of world soles (..., 2, 4, 4)."""
+    return (soles[..., 2:3, :] @ _CORNERS)[..., 0, :].min(axis=-1)
+
+
+@dataclasses.dataclass
+class Consistent:
+    """A contact-consistent trajectory and what it took."""
+
+    trajectory: Trajectory
+    weights: np.ndarray  # (T, 2, 2) each foot's (horizontal, vertical) hold weight (1: held)
+    residual: np.ndarray  # (T, 2) m, held sole's largest corner distance from its target
+    contacts: np.ndarray  # (T, 2) the rule's contacts on the raw soles (the holds')
+
+
+def world_soles(solver: LegSolver, trajectory: Trajectory) -> tuple[np.ndarray, np.ndarray]:
+    """(base placements (T, 4, 4), soles (T, 2, 4, 4)) in the world."""
+    rotation = quaternion_xyzw_matrices(np.asarray(trajectory.base_quaternion_xyzw, float))
+    base = homogeneous(np.asarray(trajectory.base_position, float), rotation)
+    return base, base[:, None] @ solver.soles(np.asarray(trajectory.joint_positions, float))
+
+
+def corrected_velocities(
+    raw_velocities: np.ndarray | None, correction: np.ndarray, dt: float
+) -> np.ndarray | None:
+    """sdot_raw + the correction's backward difference (0 at the first frame); None stays."""
+    if raw_velocities is None:
+        return None
+    change = np.zeros_like(correction)
+    change[1:] = np.diff(correction, axis=0) / dt
+    return np.asarray(raw_velocities, float) + change
+
+
+def make_consistent(
+    trajectory: Trajectory,
+    robot: Robot,
+    params: ConsistentParams,
+    contact_params: ContactParams,
+    solver: LegSolver | None = None,
+) -> Consistent:
+    """The trajectory with each foot held where it landed while in contact (module docstring);
+    its contacts: the rule on its own soles; attrs: the raw one's, `consistent` = "post" and the
+    largest residual (m)."""
+    solver = solver or LegSolver(robot, params)
+    dt = frame_period(trajectory)
+    base, soles = world_soles(solver, trajectory)
+    contacts = rollout_contacts(lowest_heights(soles), dt, contact_params)
+    holder = SoleHolder(1, params, contact_params, dt)
+    weights = np.empty((*contacts.shape, 2))
+    held = np.empty((*contacts.shape, 3))
+    for k in range(len(soles)):  # the holds alone, frame by frame (cheap), then one solve
+        weights[k] = holder.advance(soles[k : k + 1], contacts[k : k + 1])[0]
+        held[k] = holder.held[0]
+    targets = inverse(base)[:, None] @ hold_targets(soles, held, weights)
+    raw_joints = np.asarray(trajectory.joint_positions, float)
+    solution = solver.solve(raw_joints, targets, weights.max(axis=-1) > 0.0)
+    out = dataclasses.replace(
+        trajectory,
+        joint_positions=solution.joints,
+        joint_velocities=corrected_velocities(
+            trajectory.joint_velocities, solution.joints - raw_joints, dt
+        ),
+        contacts=None,
+        attrs={
+            **trajectory.attrs,
+            "consistent": "post",
+            "consistent_residual_max_m": float(solution.residual.max(initial=0.0)),
+        },
+    )
+    _, new_soles = world_soles(solver, out)
+    out.contacts = rollout_contacts(lowest_heights(new_soles), dt, contact_params)
+    return Consistent(out, weights, solution.residual, contacts)
