@@ -46,6 +46,11 @@ CLIP_PREFIX = "clip_"  # the benchmark scripts' scenario names: clip_<clip name>
 TRAIN_PREFIX = "train_"  # ... of a training clip: train_<clip name>
 HELD_OUT, TRAINING = "held_out", "training"  # the benchmark's splits (`scenario_split`)
 SCRIPT_ATTR = "script"  # a rollout's attrs: the script it ran, as JSON
+# a contact-consistent variant of a rollout (docs/consistent.md) is the scenario
+# <scenario>+<variant> (post | loop) beside the raw <scenario>; `find_rollouts` lists the raw
+# ones unless asked, so every reader that knew only raw rollouts still reads only those
+RAW = "raw"
+VARIANT_SEPARATOR = "+"
 
 
 @dataclasses.dataclass(frozen=True, order=True)
@@ -73,12 +78,27 @@ def parse_rollout_path(root: str | Path, path: str | Path) -> RolloutKey:
     return RolloutKey(parts[0], int(parts[1]), scenario, steering)
 
 
-def find_rollouts(root: str | Path) -> list[tuple[RolloutKey, Path]]:
+def find_rollouts(root: str | Path, variants: bool = False) -> list[tuple[RolloutKey, Path]]:
+    """Every raw rollout under `root`; with `variants`, the contact-consistent ones too."""
     root = Path(root)
     found = sorted((parse_rollout_path(root, p), p) for p in root.glob("*/*/*.h5"))
+    if not variants:
+        found = [(key, path) for key, path in found if split_variant(key.scenario)[1] == RAW]
     if not found:
         raise PimannError(root, "holds no rollout (<model>/<seed>/<scenario>-<steering>.h5)")
     return found
+
+
+def split_variant(scenario: str) -> tuple[str, str]:
+    """(scenario, variant) of a file's scenario name: ("forward", "post") of "forward+post",
+    ("forward", RAW) of "forward"."""
+    base, separator, variant = scenario.rpartition(VARIANT_SEPARATOR)
+    return (base, variant) if separator and base else (scenario, RAW)
+
+
+def variant_scenario(scenario: str, variant: str) -> str:
+    """The scenario name of a rollout's variant (the inverse of `split_variant`)."""
+    return scenario if variant == RAW else f"{scenario}{VARIANT_SEPARATOR}{variant}"
 
 
 def scenario_names(rollout_params: Any) -> list[str]:

@@ -49,6 +49,7 @@ from pimann.evaluate.claims import (
     claims_markdown,
     evaluate_claims,
 )
+from pimann.evaluate.consistency_measures import consistency_columns
 from pimann.evaluate.gait import GAIT_SUMMARY, with_data_gait
 from pimann.evaluate.metrics import aggregate
 
@@ -79,6 +80,11 @@ SUMMARY_METRICS = [
     "drift_yaw_max_abs",
     "walks",
     *GAIT_SUMMARY,
+    # what a contact-consistent variant changes (pimann.evaluate.consistency_measures)
+    "penetration_max_m",
+    "joint_distance_rms_rad",
+    "joint_distance_max_rad",
+    "consistent_residual_max_m",
 ]
 BASE_COLUMNS = ["time", "base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw"]
 FOOT_COLUMNS = ["time"] + [
@@ -104,10 +110,11 @@ def _metrics_job(job: tuple[Path, Any]) -> dict[str, Any]:
 
 
 def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) -> pd.DataFrame:
-    """One row per rollout: the key columns, then every `trajectory_metrics` value (the
-    ADHERENT baseline's with `train.adherent` only)."""
+    """One row per rollout, the contact-consistent variants (`<scenario>+post|loop`) beside the
+    raw ones: the key columns, then every `trajectory_metrics` value (the ADHERENT baseline's
+    with `train.adherent` only), then pimann.evaluate.consistency_measures' columns."""
     root = Path(rollouts_dir)
-    rollouts = find_rollouts(root)
+    rollouts = find_rollouts(root, variants=True)  # the contact-consistent ones beside
     if not params.train.adherent:  # not measured: the yaw-only variant is the baseline
         rollouts = [(key, path) for key, path in rollouts if key.model != ADHERENT]
     results = pool_map(
@@ -120,7 +127,8 @@ def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) 
         {**columns, **{k: v for k, v in metrics.items() if k != "source"}}
         for columns, metrics in zip(rollout_columns(root, rollouts), results, strict=True)
     ]
-    return sort_rows(pd.DataFrame(rows))
+    consistency = consistency_columns(root, [key for key, _ in rollouts], workers)
+    return sort_rows(pd.concat([pd.DataFrame(rows), consistency], axis=1))
 
 
 def sort_rows(frame: pd.DataFrame) -> pd.DataFrame:

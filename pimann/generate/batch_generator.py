@@ -24,7 +24,7 @@ import torch
 
 from pimann.core.contacts import SchmittTrigger
 from pimann.core.errors import PimannError
-from pimann.core.params import ContactParams, RolloutParams
+from pimann.core.params import ConsistentParams, ContactParams, RolloutParams
 from pimann.core.robot import Robot
 from pimann.core.rotations import (
     exp_so3,
@@ -37,6 +37,7 @@ from pimann.core.rotations import (
     yaw_only,
 )
 from pimann.core.trajectory import Trajectory
+from pimann.generate.contact_consistent import InLoopHold
 from pimann.generate.future_window import command_weights, next_future_matrix
 from pimann.generate.leg_odometry import Odometry
 from pimann.generate.rollout_network import RolloutNetwork
@@ -46,7 +47,8 @@ from pimann.learn.features import clip_phase, first_differences
 from pimann.learn.gait_phase import unit_phase
 from pimann.learn.standing import StandingPose
 
-SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts")  # timed
+# timed ("consistent": the in-loop hold, pimann.generate.contact_consistent)
+SECTIONS = ("commands", "inputs", "network", "steering", "odometry", "contacts", "consistent")
 
 
 def data_start(
@@ -120,7 +122,10 @@ class BatchGenerator:
         robot: Robot,
         contact_params: ContactParams,
         standing: StandingPose,
+        consistent: ConsistentParams | None = None,
     ):
+        """`consistent`: hold each foot in contact where it landed and feed the held legs back
+        (pimann.generate.contact_consistent; None: the network's legs, the raw rollout)."""
         rows = len(steering)
         self.params, self.network = params, RolloutNetwork(model, layout, stats)
         self.steering = np.asarray(steering, dtype=bool)
@@ -181,6 +186,10 @@ class BatchGenerator:
         self.stopped, self.stand_since = np.ones(rows, dtype=bool), np.zeros(rows, dtype=int)
         self.stop_step, self.blending = np.zeros(rows, dtype=int), np.zeros(rows, dtype=bool)
         self.stop_joints, self.stop_roll_pitch = self.joints.copy(), np.zeros((rows, 2))
+        self.hold = None
+        if consistent is not None:
+            self.hold = InLoopHold(robot, rows, consistent, contact_params, self.dt)
+            self._hold()
 
     def start_in_gait(
         self,
@@ -420,8 +429,21 @@ class BatchGenerator:
         self._lap("odometry")  # with the walking rows' new orientation above
         self.contacts = self.trigger.update(heights)
         self._lap("contacts")
+        if self.hold is not None:
+            self._hold()
+            self._lap("consistent")
         self._feedback(any_stopped)
         self._lap("commands")
+
+    def _hold(self) -> None:
+        """The feet in contact held where they landed: the legs re-solved, their joint
+        velocities corrected, and the leg odometry's feet moved to where the legs put them (its
+        later anchors); what the network sees at the next step."""
+        self.joints, self.joint_velocities = self.hold.apply(
+            self.position, self.rotation, self.joints, self.joint_velocities, self.contacts
+        )
+        corners = self.odometry.rotated_corners(self.rotation, self.joints)
+        self.odometry.world_corners = corners + self.position[:, None, :, None]
 
     def _feedback(self, any_stopped: bool) -> None:
         """The pose fed back at the next step: y_i's, or the rollout's own (stopped rows)."""

@@ -2,21 +2,22 @@
 
 The network's feet glide at the position level while the contact rule says they are down. A
 contact-consistent trajectory holds each sole at its touchdown pose while it is in contact
-(the study's rule, pimann.core.contacts, on the lowest corner of the trajectory's own sole,
-with `contacts` params): the sole origin's horizontal position and yaw at touchdown, the
-sole flat (roll = pitch = 0) with its origin on the floor (z = 0). Each leg's 6 joints are
-re-solved so that the sole reaches its target; the base pose, the upper body and a foot in
-swing stay the network's. A hold weight per foot rises by 1 / n a frame while the foot is in
-contact and falls by 1 / n a frame while it is not (n = `blend_s` in frames), and the target is
-the raw sole pose moved that far towards the held one: touchdown and lift-off blend over n
-frames, no joint jumps, and a foot that leaves the floor for less than n frames keeps its hold.
+(the study's rule, pimann.core.contacts, with the `contacts` params, on the lowest corner of
+the network's sole): the sole origin's horizontal position and yaw at touchdown, the sole flat
+(roll = pitch = 0) with its origin on the floor (z = 0). Each leg's 6 joints are re-solved so
+that the sole reaches its target; the base pose, the upper body and a foot in swing stay the
+network's. Touchdown and lift-off blend over n = `blend_s` frames (`SoleHolder`): no joint
+jumps, and a foot that leaves the floor for less than n frames keeps its hold.
 
 The legs are solved together for every frame (or every rollout of a batch) at once: damped
 Gauss-Newton on the sole's 6D error (position, and the vee of the rotation error's skew
-part), warm-started from the network's joints of the same frame, Jacobians by finite
-differences of the numpy leg chains (pimann.generate.leg_odometry.SoleFrames, pinocchio's
-geometry), joint limits by clipping. A frame still beyond `tolerance` after `iterations` gets up
-to `EXTRA_ITERATIONS` more; what remains is reported (`residual`), never hidden.
+part), warm-started from the network's joints of the same frame, geometric Jacobians of the
+numpy leg chains (pimann.generate.leg_odometry.SoleFrames, pinocchio's geometry), a step
+kept only where it lowers the error (Levenberg-Marquardt damping), joint limits by clipping
+(a joint the network put beyond a limit may not go farther). A held sole still beyond
+`tolerance` after `iterations` gets up to `EXTRA_ITERATIONS` more; a blending one does not
+need them. What remains of a held sole's error is reported (`residual`, the attrs'
+`consistent_residual_max_m`): a sole out of the leg's reach from the network's base.
 
 Joint velocities of the output: the file's own plus the change of the correction per frame,
 sdot = sdot_raw + (dq_k - dq_{k-1}) / dt with dq = q - q_raw. Where the network's velocities
@@ -33,17 +34,19 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import torch
 from scipy.spatial.transform import Rotation
 
-from pimann.core.contacts import contacts_from_heights, frame_period
+from pimann.core.contacts import FEET, contacts_from_heights, frame_period
+from pimann.core.errors import PimannError
 from pimann.core.params import ConsistentParams, ContactParams
 from pimann.core.robot import LEG_JOINTS, SOLE_CORNERS, Robot
 from pimann.core.rotations import quaternion_xyzw_matrices, rot_z, skew_part, vee, yaw_of
 from pimann.core.trajectory import Trajectory
 from pimann.generate.leg_odometry import SoleFrames
+from pimann.learn.kinematics_torch import TorchKinematics
 
 VARIANTS = ("post", "loop")  # the contact-consistent rollout variants beside the raw one
-FD_STEP = 1e-7  # rad: finite-difference step of the leg Jacobian (error ~1e-7 of a column)
 # Gauss-Newton iterations beyond `iterations` for the frames whose held sole is still farther
 # than `tolerance` from its target (a long stance far from the network's foot); cheap, since
 # they run on those frames only
@@ -108,13 +111,38 @@ class LegSolution:
 
 
 class LegSolver:
-    """Both legs' joints for sole targets in the base frame, every row (frame, rollout) at once."""
+    """Both legs' joints for sole targets in the base frame, every row (frame, rollout) at once.
+
+    The chains are pimann.generate.leg_odometry.SoleFrames' (pinocchio's geometry), multiplied
+    joint after joint so that every joint's axis and origin come out too: the Jacobian is
+    geometric (axis x lever arm), one chain pass an iteration.
+    """
 
     def __init__(self, robot: Robot, params: ConsistentParams):
         self.frames = SoleFrames(robot)
         self.params = params
         self.lower = robot.joint_lower[LEGS]
         self.upper = robot.joint_upper[LEGS]
+        chains = TorchKinematics(robot, torch.float64, "cpu", frames=FEET)
+        if not np.array_equal(chains.index.numpy(), LEGS):
+            raise PimannError(robot.urdf_path, "the sole chains are not the 6 leg joints each")
+        # each joint's axis in its own frame: P [a] = rot_k, so [a] = P^T rot_k
+        skew = np.swapaxes(chains.placement_rot.numpy(), -1, -2) @ chains.rot_k.numpy()
+        self.axes = vee(skew)  # (2, 6, 3)
+        self.depth = LEGS.shape[1] + 1  # the joints, then the sole frame's fixed placement
+
+    def chain(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(soles (B, 2, 4, 4), joint axes (B, 2, 6, 3), joint origins (B, 2, 6, 3)), base
+        frame."""
+        frames = self.frames
+        sin_cos = np.sin(joints[:, frames.index, None] + frames.shift)[..., None, :]
+        local = (sin_cos @ frames.varying + frames.constant).reshape(*sin_cos.shape[:3], 4, 4)
+        placements = [local[:, :, 0]]
+        for k in range(1, self.depth):
+            placements.append(placements[-1] @ local[:, :, k])
+        joint_frames = np.stack(placements[:-1], axis=2)  # (B, 2, 6, 4, 4)
+        axes = (joint_frames[..., :3, :3] @ self.axes[..., None])[..., 0]
+        return placements[-1], axes, joint_frames[..., :3, 3]
 
     def soles(self, joints: np.ndarray) -> np.ndarray:
         """(B, 2, 4, 4) both soles in the base frame."""
@@ -122,17 +150,44 @@ class LegSolver:
 
     def _error(self, joints: np.ndarray, targets: np.ndarray) -> np.ndarray:
         """(B, 2, 6) position error, then the rotation error's vee(skew(R_t^T R))."""
-        soles = self.soles(joints)
+        return self._error_of(self.soles(joints), targets)
+
+    @staticmethod
+    def _error_of(soles: np.ndarray, targets: np.ndarray) -> np.ndarray:
         out = np.empty((*soles.shape[:2], 6))
         out[..., :3] = soles[..., :3, 3] - targets[..., :3, 3]
         relative = np.swapaxes(targets[..., :3, :3], -1, -2) @ soles[..., :3, :3]
         out[..., 3:] = vee(skew_part(relative))
         return out
 
-    def _cost(self, joints: np.ndarray, targets: np.ndarray, active: np.ndarray) -> tuple:
+    def _jacobian(self, joints: np.ndarray, targets: np.ndarray) -> np.ndarray:
+        """(B, 2, 6 errors, 6 joints) of `_error`: the lever arm a x (p - o) for the position;
+        for vee(skew(M)), M = R_t^T R, d M = [R_t^T a] M, so 0.5 (tr M I - M) R_t^T a."""
+        soles, axes, origins = self.chain(joints)
+        jacobian = np.empty((*soles.shape[:2], 6, 6))
+        lever = soles[..., None, :3, 3] - origins
+        jacobian[..., :3, :] = np.swapaxes(np.cross(axes, lever), -1, -2)
+        target_t = np.swapaxes(targets[..., :3, :3], -1, -2)
+        relative = target_t @ soles[..., :3, :3]
+        trace = np.trace(relative, axis1=-2, axis2=-1)[..., None, None]
+        jacobian[..., 3:, :] = (
+            0.5 * (trace * np.eye(3) - relative) @ target_t @ np.swapaxes(axes, -1, -2)
+        )
+        return jacobian
+
+    def _cost(
+        self, joints: np.ndarray, targets: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """(error (B, 2, 6), cost (B, 2): its squared norm, 0 for an inactive leg)."""
         error = self._error(joints, targets)
         return error, np.where(active, (error * error).sum(axis=-1), 0.0)
+
+    @staticmethod
+    def _step(jacobian: np.ndarray, error: np.ndarray, damping: np.ndarray) -> np.ndarray:
+        """(B, 2, 6) the damped Gauss-Newton step (J^T J + lambda I) dq = -J^T e."""
+        jacobian_t = np.swapaxes(jacobian, -1, -2)
+        normal = jacobian_t @ jacobian + damping[..., None, None] * np.eye(6)
+        return np.linalg.solve(normal, -(jacobian_t @ error[..., None]))[..., 0]
 
     def _iterate(
         self,
@@ -146,18 +201,16 @@ class LegSolver:
         """One damped Gauss-Newton step of the active legs, in place, kept only where it
         lowers the leg's error (else its damping grows tenfold: Levenberg-Marquardt, which a
         straight knee at its limit needs); returns the new (error, cost)."""
-        jacobian = np.empty((*error.shape, 6))  # (B, 2, 6 errors, 6 joints)
-        for j in range(6):
-            moved = joints.copy()
-            moved[:, LEGS[:, j]] += FD_STEP
-            jacobian[..., j] = (self._error(moved, targets) - error) / FD_STEP
-        jacobian_t = np.swapaxes(jacobian, -1, -2)
-        normal = jacobian_t @ jacobian + damping[..., None, None] * np.eye(6)
-        step = np.linalg.solve(normal, -(jacobian_t @ error[..., None]))[..., 0]
-        trial = joints.copy()
+        jacobian = self._jacobian(joints, targets)
         legs = joints[:, LEGS]
         # within the limits; a joint the network put beyond one may not go farther
         lower, upper = np.minimum(self.lower, legs), np.maximum(self.upper, legs)
+        step = self._step(jacobian, error, damping)
+        blocked = (legs + step < lower) | (legs + step > upper)
+        if blocked.any():  # a joint stopped by its limit: the others solve without it
+            jacobian = np.where(blocked[..., None, :], 0.0, jacobian)
+            step = self._step(jacobian, error, damping)
+        trial = joints.copy()
         legs = legs + np.where(active[..., None], step, 0.0)
         trial[:, LEGS] = np.clip(legs, lower, upper)
         trial_error, trial_cost = self._cost(trial, targets, active)
@@ -167,15 +220,24 @@ class LegSolver:
         error = np.where(better[..., None], trial_error, error)
         return error, np.where(better, trial_cost, cost)
 
-    def solve(self, joints: np.ndarray, targets: np.ndarray, active: np.ndarray) -> LegSolution:
+    def solve(
+        self,
+        joints: np.ndarray,
+        targets: np.ndarray,
+        active: np.ndarray,
+        strict: np.ndarray | None = None,
+    ) -> LegSolution:
         """Legs of `active` (B, 2) re-solved from `joints` (B, 26) towards `targets` (B, 2, 4, 4,
-        base frame); the other legs and every other joint unchanged."""
+        base frame); the other legs and every other joint unchanged. Only the legs of `strict`
+        (default: every active one; the held soles) get the iterations beyond `iterations`
+        that bring them within `tolerance`."""
         joints = np.array(joints, dtype=float)
         rows = np.flatnonzero(active.any(axis=1))
         residual = np.zeros(active.shape)
         if not len(rows):
             return LegSolution(joints, residual, 0)
         part, goal, on = joints[rows], targets[rows], active[rows]
+        strict = on if strict is None else on & strict[rows]
         error, cost = self._cost(part, goal, on)
         damping = np.full(on.shape, float(self.params.damping))
         done = 0
@@ -183,7 +245,7 @@ class LegSolver:
             error, cost = self._iterate(part, goal, on, error, cost, damping)
             if done >= self.params.iterations:
                 gap = np.where(on, corner_distance(self.soles(part), goal), 0.0)
-                on = on & (gap > self.params.tolerance)
+                on = on & strict & (gap > self.params.tolerance)
                 if not on.any():
                     break
         joints[rows] = part
@@ -310,7 +372,8 @@ def make_consistent(
         held[k] = holder.held[0]
     targets = inverse(base)[:, None] @ hold_targets(soles, held, weights)
     raw_joints = np.asarray(trajectory.joint_positions, float)
-    solution = solver.solve(raw_joints, targets, weights.max(axis=-1) > 0.0)
+    held = weights.min(axis=-1) >= 1.0
+    solution = solver.solve(raw_joints, targets, weights.max(axis=-1) > 0.0, held)
     out = dataclasses.replace(
         trajectory,
         joint_positions=solution.joints,
@@ -321,9 +384,60 @@ def make_consistent(
         attrs={
             **trajectory.attrs,
             "consistent": "post",
-            "consistent_residual_max_m": float(solution.residual.max(initial=0.0)),
+            "consistent_residual_max_m": float(np.where(held, solution.residual, 0.0).max()),
         },
     )
-    _, new_soles = world_soles(solver, out)
-    out.contacts = rollout_contacts(lowest_heights(new_soles), dt, contact_params)
+    out.contacts = own_contacts(out, solver, contact_params)
     return Consistent(out, weights, solution.residual, contacts)
+
+
+class InLoopHold:
+    """The hold inside the batched generator: one frame of B rollouts at a time, after the
+    network's step and the contact rule, before the state is fed back."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        rows: int,
+        params: ConsistentParams,
+        contact_params: ContactParams,
+        dt: float,
+    ):
+        self.solver = LegSolver(robot, params)
+        self.holder = SoleHolder(rows, params, contact_params, dt)
+        self.dt = dt
+        self.correction = np.zeros((rows, len(LEG_JOINTS)))  # q - q_network of the legs
+        self.residual = np.zeros(rows)  # m, largest held-sole residual so far
+        self.weights = np.zeros((rows, 2, 2))  # the last frame's hold weights
+
+    def apply(
+        self,
+        position: np.ndarray,
+        rotation: np.ndarray,
+        joints: np.ndarray,
+        joint_velocities: np.ndarray,
+        contacts: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(joints, joint velocities) of B rows with their held legs re-solved."""
+        base = homogeneous(position, rotation)
+        soles = base[:, None] @ self.solver.soles(joints)
+        targets, weights = self.holder.step(soles, contacts)
+        self.weights = weights
+        held = weights.min(axis=-1) >= 1.0
+        solution = self.solver.solve(
+            joints, inverse(base)[:, None] @ targets, weights.max(axis=-1) > 0.0, held
+        )
+        correction = (solution.joints - joints)[:, LEG_JOINTS]
+        velocities = np.array(joint_velocities, dtype=float)
+        velocities[:, LEG_JOINTS] += (correction - self.correction) / self.dt
+        self.correction = correction
+        self.residual = np.maximum(self.residual, np.where(held, solution.residual, 0.0).max(1))
+        return solution.joints, velocities
+
+
+def own_contacts(
+    trajectory: Trajectory, solver: LegSolver, contact_params: ContactParams
+) -> np.ndarray:
+    """(T, 2) the rule's contacts on a rollout's own soles (both down at the start)."""
+    _, soles = world_soles(solver, trajectory)
+    return rollout_contacts(lowest_heights(soles), frame_period(trajectory), contact_params)

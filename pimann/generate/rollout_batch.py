@@ -78,6 +78,7 @@ from threadpoolctl import ThreadpoolController
 from pimann.core.errors import PimannError
 from pimann.core.params import (
     DEFAULT_PARAMS,
+    ConsistentParams,
     ContactParams,
     Params,
     RolloutParams,
@@ -88,6 +89,7 @@ from pimann.core.robot import Robot, load_robot
 from pimann.core.trajectory import Trajectory, write_trajectory
 from pimann.generate.batch_generator import BatchGenerator
 from pimann.generate.command_script import Command, ScriptSteps, scenario_steps  # noqa: F401 (Command)
+from pimann.generate.contact_consistent import own_contacts
 from pimann.learn.feature_layout import FeatureLayout, Normalisation
 from pimann.learn.standing import StandingPose
 
@@ -131,9 +133,13 @@ def generate_batch(
     standing: StandingPose | None = None,
     start_joint_velocities: np.ndarray | None = None,
     timings: dict[str, float] | None = None,
+    consistent: ConsistentParams | None = None,
 ) -> list[Rollout]:
     """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
+    `consistent`: contact-consistent rollouts, each foot in contact held where it landed inside
+    the loop (pimann.generate.contact_consistent; attrs `consistent` = "loop", contacts: the
+    rule on the file's own soles); None: the raw rollouts.
     `standing`: the pose to start from and return to (default: the robot's nominal one;
     generated files start from the model's, `generate_files`);
     `start_joint_velocities` (nj,): the joints' velocities at the start (default: at rest;
@@ -152,6 +158,7 @@ def generate_batch(
         robot or load_robot(),
         contact_params,
         standing or StandingPose.nominal(),
+        consistent,
     )
     if start_joint_velocities is not None:
         generator.joint_velocities[:] = start_joint_velocities
@@ -213,6 +220,10 @@ def generate_batch(
             joint_velocities=kept["joint_velocities"],
             attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
         )
+        if generator.hold is not None:
+            trajectory.contacts = own_contacts(trajectory, generator.hold.solver, contact_params)
+            trajectory.attrs["consistent"] = "loop"
+            trajectory.attrs["consistent_residual_max_m"] = float(generator.hold.residual[row])
         rollouts.append(
             Rollout(trajectory, kept["goal"], kept["stopped"], kept["foot"], kept["base_velocity"])
         )
@@ -293,6 +304,7 @@ class FileJob:
     steering: bool
     output: Path
     protocol: str | None = None
+    loop: bool = False  # the contact-consistent rollout held inside the loop (rollout.consistent)
 
     def rollout_params(self, params: Params) -> RolloutParams:
         """The rollout params this job runs with."""
@@ -329,11 +341,13 @@ def _model_rollouts(
     }
     rate = float(layout.rate_hz)
     robot = load_robot()
-    groups: dict[tuple[str | None, bool], list[FileJob]] = {}
+    groups: dict[tuple[str | None, bool, bool], list[FileJob]] = {}
     for job in jobs:  # a protocol's jobs run with its own params, a batch of their own
-        groups.setdefault((job.protocol, job.steering and job.protocol is not None), []).append(job)
+        key = (job.protocol, job.steering and job.protocol is not None, job.loop)
+        groups.setdefault(key, []).append(job)
     for group in groups.values():
         rollout = group[0].rollout_params(params)
+        consistent = params.rollout.consistent if group[0].loop else None
         ordered = sorted(group, key=lambda job: -len(scenario_steps(job.script, rate)))
         for first in range(0, len(ordered), batch_size):
             chunk = ordered[first : first + batch_size]
@@ -362,6 +376,7 @@ def _model_rollouts(
                 robot,
                 contact_params=params.contacts,
                 standing=standing,
+                consistent=consistent,
             )
             yield from zip(chunk, (rollout.trajectory for rollout in rollouts), strict=True)
 

@@ -13,6 +13,7 @@ of a few training clips per motion class.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import shutil
@@ -26,10 +27,14 @@ from pimann.core.parallel import pool_map
 from pimann.core.params import Params
 from pimann.core.rollout_files import (
     MODELS_FILE,
+    RAW,
     RolloutKey,
     Segment,
+    parse_rollout_path,
     rollout_path,
     scenario_names,
+    split_variant,
+    variant_scenario,
 )
 from pimann.generate.benchmark_clips import benchmark_scripts
 from pimann.learn.model_files import model_seeds
@@ -61,7 +66,7 @@ def models_record(models_dir: str | Path) -> dict[str, Any]:
 
 
 def _generate_seed(
-    job: tuple[Path, list[tuple[str, list[Segment], bool, Path, str | None]], Params],
+    job: tuple[Path, list[tuple[str, list[Segment], bool, Path, str | None, bool]], Params],
 ) -> str | None:
     """One seed's rollouts, generated together in batches
     (pimann.generate.rollout_batch.generate_files);
@@ -101,7 +106,9 @@ def run_rollouts(
     models_dir: str | Path, out_dir: str | Path, params: Params, workers: int = 2
 ) -> list[Path]:
     """Every seed of one training output x every script of `rollout_scripts` (the named
-    scenarios and the benchmark clips), with and without steering.
+    scenarios and the benchmark clips), with and without steering; and, with "loop" in
+    `rollout.consistent.variants`, the contact-consistent rollouts of its scenarios held inside
+    the loop (`<scenario>+loop`; the "post" ones: `write_seed_rollouts`).
 
     One job per seed (`workers` processes): its scripts x steering advance together as one
     batch (pimann.generate.batch_generator). Written into `out_dir` (= results/rollouts/<model>) as
@@ -111,13 +118,27 @@ def run_rollouts(
     runs = [(sc, script, None) for sc, script in scripts.items()] + [
         (name, protocol.script, name) for name, protocol in params.rollout.protocols.items()
     ]  # a protocol runs under its own name, with the rollout keys it sets
+    consistent = params.rollout.consistent
+    variants = [(RAW, False)] + [("loop", True)] * ("loop" in consistent.variants)
 
     def seed_job(tmp: Path, seed: int, folder: Path) -> tuple:
-        files = [
-            (sc, script, st, rollout_path(tmp.parent, RolloutKey(tmp.name, seed, sc, st)), protocol)
-            for sc, script, protocol in runs
-            for st in (False, True)
-        ]
+        files = []
+        for variant, loop in variants:
+            for sc, script, protocol in runs:
+                if loop and sc not in consistent.scenarios:
+                    continue
+                name = variant_scenario(sc, variant)
+                files += [
+                    (
+                        name,
+                        script,
+                        st,
+                        rollout_path(tmp.parent, RolloutKey(tmp.name, seed, name, st)),
+                        protocol,
+                        loop,
+                    )
+                    for st in (False, True)
+                ]
         return folder, files, params
 
     return write_seed_rollouts(models_dir, out_dir, params, seed_job, _generate_seed, workers)
@@ -133,7 +154,9 @@ def write_seed_rollouts(
 ) -> list[Path]:
     """Each seed's rollouts by `generate_seed(seed_job(tmp, seed, model folder))` (an error
     naming the file, or None), `workers` processes, into `out_dir` as a whole, atomically, with
-    `MODELS_FILE`: the models' meta and the seeds that failed (recorded; the others go on)."""
+    `MODELS_FILE`: the models' meta and the seeds that failed (recorded; the others go on).
+    With "post" in `rollout.consistent.variants`, each raw rollout of its scenarios also
+    post-processed into its contact-consistent variant `<scenario>+post` (`_post_seed`)."""
     models_dir, out_dir = Path(models_dir), Path(out_dir)
     seeds = model_seeds(models_dir)
     record = {
@@ -155,5 +178,31 @@ def write_seed_rollouts(
             shutil.rmtree(tmp / seed)  # no half set of a seed's rollouts
         if len(record["failed"]) == len(seeds):
             raise PimannError(models_dir, f"every seed failed; first: {failures[0]}")
+        if "post" in params.rollout.consistent.variants:
+            done = [tmp / str(seed) for seed in seeds if str(seed) not in record["failed"]]
+            jobs = [(folder, params) for folder in done]
+            pool_map(_post_seed, jobs, workers, f"consistent {out_dir.name}", "seeds")
         (tmp / MODELS_FILE).write_text(json.dumps(record, indent=2) + "\n")
     return sorted(out_dir.glob("*/*.h5"))
+
+
+def _post_seed(job: tuple[Path, Params]) -> None:
+    """The contact-consistent variant `<scenario>+post` of each raw rollout of one seed's
+    folder whose scenario is in `rollout.consistent.scenarios`
+    (pimann.generate.contact_consistent), beside it."""
+    from pimann.core.robot import load_robot
+    from pimann.core.trajectory import read_trajectory, write_trajectory
+    from pimann.generate.contact_consistent import LegSolver, make_consistent
+
+    folder, params = job
+    consistent, robot = params.rollout.consistent, load_robot()
+    solver = LegSolver(robot, consistent)
+    root = folder.parent.parent
+    for path in sorted(folder.glob("*.h5")):
+        key = parse_rollout_path(root, path)
+        scenario, variant = split_variant(key.scenario)
+        if variant != RAW or scenario not in consistent.scenarios:
+            continue
+        out = make_consistent(read_trajectory(path), robot, consistent, params.contacts, solver)
+        post = dataclasses.replace(key, scenario=variant_scenario(scenario, "post"))
+        write_trajectory(rollout_path(root, post), out.trajectory)

@@ -1,0 +1,66 @@
+"""What a contact-consistent rollout changes (docs/consistent.md): metrics.csv's columns beside
+the sliding measures, for every rollout (raw ones too, where they apply).
+
+- `rollout_variant`: raw, post or loop (the scenario's suffix, pimann.core.rollout_files);
+- `penetration_max_m`: how far the lowest sole corner goes below the floor (0: never);
+- `joint_distance_rms_rad`, `joint_distance_max_rad`: the joints' distance to the raw twin
+  (the same model, seed, scenario and steering), RMS and largest over every frame and joint;
+  empty for a raw rollout;
+- `consistent_residual_max_m`: the largest distance of a held sole from its target that the
+  leg IK left (the file's attrs; empty for a raw rollout).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pimann.core.parallel import pool_map
+from pimann.core.rollout_files import RAW, RolloutKey, rollout_path, split_variant
+
+COLUMNS = (
+    "rollout_variant",
+    "penetration_max_m",
+    "joint_distance_rms_rad",
+    "joint_distance_max_rad",
+    "consistent_residual_max_m",
+)
+
+
+def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
+    """The columns of one rollout (read with its raw twin where it is a variant)."""
+    from pimann.core.contacts import foot_kinematics, trajectory_configurations
+    from pimann.core.robot import load_robot
+    from pimann.core.trajectory import read_trajectory
+
+    root, key = job
+    robot = load_robot("retarget")
+    trajectory = read_trajectory(rollout_path(root, key))
+    heights = foot_kinematics(robot, trajectory_configurations(robot, trajectory)).heights
+    scenario, variant = split_variant(key.scenario)
+    out: dict[str, Any] = {
+        "rollout_variant": variant,
+        "penetration_max_m": float(max(0.0, -heights.min())),
+        "joint_distance_rms_rad": None,
+        "joint_distance_max_rad": None,
+        "consistent_residual_max_m": trajectory.attrs.get("consistent_residual_max_m"),
+    }
+    twin = rollout_path(root, dataclasses.replace(key, scenario=scenario))
+    if variant != RAW and twin.is_file():
+        raw = read_trajectory(twin).joint_positions
+        frames = min(len(raw), len(trajectory))
+        distance = trajectory.joint_positions[:frames] - raw[:frames]
+        out["joint_distance_rms_rad"] = float(np.sqrt(np.mean(distance**2)))
+        out["joint_distance_max_rad"] = float(np.abs(distance).max())
+    return out
+
+
+def consistency_columns(root: str | Path, keys: list[RolloutKey], workers: int = 1) -> pd.DataFrame:
+    """`COLUMNS` of each rollout of `keys` under `root`, one row each, in order."""
+    jobs = [(Path(root), key) for key in keys]
+    rows = pool_map(_measures, jobs, workers, "consistency measures")
+    return pd.DataFrame(rows, columns=list(COLUMNS))
