@@ -4,6 +4,7 @@ swing untouched, the leg IK checked against pinocchio's forward kinematics."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import numpy as np
 import pinocchio as pin
@@ -259,3 +260,26 @@ def test_the_rollout_stage_writes_and_evaluate_measures_the_variants(tmp_path, p
         np.abs(distance).max()
     )
     assert (frame["penetration_max_m"] >= 0).all()
+
+
+def test_simulate_runs_read_the_variant_they_name(tmp_path, params):
+    """A run with `variant: post` walks `<scenario>+post`, named so in results/sim; one whose
+    variant the rollout stage does not make is refused before any simulation."""
+    from pimann.core.errors import PimannError
+    from pimann.core.params import SimulateRun
+    from pimann.sim.run_list import run_key, run_name, simulate_runs
+
+    run = SimulateRun("w10", 0, "forward", True, False, "online", "post")
+    assert run_key(run).scenario == "forward+post"
+    assert run_name(run) == "w10-0-forward+post-steering-online"
+    assert run_name(dataclasses.replace(run, variant="raw")) == "w10-0-forward-steering-online"
+    no_pushes = dataclasses.replace(params.simulate.pushes, rollouts=[])
+    for runs, message in (
+        ([run], re.escape("w10/0/forward+post-steering.h5: rollout not found")),
+        ([dataclasses.replace(run, scenario="backward")], "needs rollout.consistent"),
+    ):
+        study = dataclasses.replace(
+            params, simulate=dataclasses.replace(params.simulate, runs=runs, pushes=no_pushes)
+        )
+        with pytest.raises(PimannError, match=message):
+            simulate_runs(tmp_path / "rollouts", tmp_path / "sim", tmp_path / "s.json", study)

@@ -1,6 +1,7 @@
 """The simulate stage's work: chosen rollouts walked in MuJoCo, one result file each, a summary.
 
-results/sim/<model>-<seed>-<scenario>-<steering|nosteering>[-online].h5   (simulation_files)
+results/sim/<model>-<seed>-<scenario>[+<variant>]-<steering|nosteering>[-online].h5
+                                            (simulation_files; the variant when not raw)
 results/sim/<same name>.mp4                                       (runs marked `video`)
 results/sim/pushes.png                                            (simulate.pushes, if any)
 summary JSON: per run the summary figures, per push study the largest push survived per
@@ -20,7 +21,7 @@ from pimann.core.errors import PimannError, about
 from pimann.core.params import Params, SimulateRun, as_dict
 from pimann.core.paths import repo_relative
 from pimann.core.progress import track
-from pimann.core.rollout_files import STEERING_LABEL, RolloutKey, rollout_path
+from pimann.core.rollout_files import STEERING_LABEL, RolloutKey, rollout_path, variant_scenario
 from pimann.core.trajectory import read_trajectory
 from pimann.sim.closed_loop import simulate_trajectory
 from pimann.sim.pushes import plot_push_recovery, push_records, push_recovery
@@ -30,9 +31,18 @@ from pimann.sim.video import render_simulation
 log = logging.getLogger(__name__)
 
 
+def run_key(run: SimulateRun) -> RolloutKey:
+    """The rollout a run walks: the raw one, or its contact-consistent variant (`variant`)."""
+    return RolloutKey(
+        run.model, run.seed, variant_scenario(run.scenario, run.variant), run.steering
+    )
+
+
 def run_name(run: SimulateRun) -> str:
-    """The offline controller's runs keep their names; the online one's gain `-online`."""
-    name = f"{run.model}-{run.seed}-{run.scenario}-{STEERING_LABEL[run.steering]}"
+    """The offline controller's raw runs keep their names; a variant's scenario gains
+    `+<variant>`, the online controller's runs `-online`."""
+    key = run_key(run)
+    name = f"{key.model}-{key.seed}-{key.scenario}-{STEERING_LABEL[key.steering]}"
     return name if run.controller == "offline" else f"{name}-{run.controller}"
 
 
@@ -60,9 +70,17 @@ def simulate_runs(
     if not sim.runs:
         raise PimannError(None, "simulate.runs is empty: nothing to simulate")
     jobs = []
+    consistent = params.rollout.consistent
     for run in sim.runs:
-        key = RolloutKey(run.model, run.seed, run.scenario, run.steering)
-        path = rollout_path(rollouts_dir, key)
+        path = rollout_path(rollouts_dir, run_key(run))
+        if run.variant != "raw" and not (
+            run.variant in consistent.variants and run.scenario in consistent.scenarios
+        ):
+            raise PimannError(
+                "params.yaml",
+                f"simulate.runs: {run_name(run)} needs rollout.consistent to make the "
+                f"{run.variant!r} variant of {run.scenario!r}",
+            )
         if not path.is_file():
             raise PimannError(path, "rollout not found (run the rollout stage first)")
         jobs.append((run, path))
@@ -87,6 +105,7 @@ def simulate_runs(
                 "scenario": run.scenario,
                 "steering": run.steering,
                 "controller": run.controller,
+                "variant": run.variant,
                 "rollout": repo_relative(path),
             }
             try:
