@@ -49,8 +49,10 @@ from pimann.learn.kinematics_torch import TorchKinematics
 VARIANTS = ("post", "loop")  # the contact-consistent rollout variants beside the raw one
 # Gauss-Newton iterations beyond `iterations` for the frames whose held sole is still farther
 # than `tolerance` from its target (a long stance far from the network's foot); cheap, since
-# they run on those frames only
+# they run on those frames only, and only while each lowers the squared error below STALL x
+# the one before (else the sole is out of reach: its residual is reported)
 EXTRA_ITERATIONS = 20
+STALL = 0.9
 # a foot whose network sole's lowest corner is below this share of the rule's off height is
 # held flat on the floor; above it the hold lets it rise, to the network's own height at the
 # off height (a lift-off the rule sees when the network's foot does)
@@ -240,14 +242,24 @@ class LegSolver:
         strict = on if strict is None else on & strict[rows]
         error, cost = self._cost(part, goal, on)
         damping = np.full(on.shape, float(self.params.damping))
-        done = 0
-        for done in range(1, self.params.iterations + EXTRA_ITERATIONS + 1):
+        for _ in range(self.params.iterations):
             error, cost = self._iterate(part, goal, on, error, cost, damping)
-            if done >= self.params.iterations:
-                gap = np.where(on, corner_distance(self.soles(part), goal), 0.0)
-                on = on & strict & (gap > self.params.tolerance)
-                if not on.any():
-                    break
+        done = self.params.iterations
+        # the held soles still beyond tolerance, alone, while their error keeps falling
+        gap = np.where(strict, corner_distance(self.soles(part), goal), 0.0)
+        on = strict & (gap > self.params.tolerance)
+        for _ in range(EXTRA_ITERATIONS):
+            some = np.flatnonzero(on.any(axis=1))
+            if not len(some):
+                break
+            done += 1
+            sub, before, sub_damping = part[some], cost[some], damping[some]
+            error[some], cost[some] = self._iterate(
+                sub, goal[some], on[some], error[some], before, sub_damping
+            )
+            part[some], damping[some] = sub, sub_damping
+            gap = corner_distance(self.soles(sub), goal[some])
+            on[some] &= (gap > self.params.tolerance) & (cost[some] < STALL * before)
         joints[rows] = part
         residual[rows] = np.where(active[rows], corner_distance(self.soles(part), goal), 0.0)
         return LegSolution(joints, residual, done)
