@@ -57,6 +57,13 @@ STALL = 0.9
 # held flat on the floor; above it the hold lets it rise, to the network's own height at the
 # off height (a lift-off the rule sees when the network's foot does)
 FLAT_SHARE = 0.5
+# a held sole stays within this of the network's sole origin horizontally and of its yaw;
+# beyond, the hold follows the network's foot just enough (`leash`): tried on the retargeted
+# walks with a sideways drift, these hold every stance a leg can reach, where a leash on the
+# hip-to-sole distance (the leg's length) held less and a hold without leash stretched legs
+# out of reach on turns on the spot
+MAX_HOLD_GAP = 0.15  # m
+MAX_HOLD_TURN = 0.5  # rad
 LEGS = np.array(LEG_JOINTS).reshape(2, 6)  # study joints of the left and the right leg
 _CORNERS = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homogeneous
 
@@ -289,11 +296,12 @@ class SoleHolder:
     def advance(self, soles: np.ndarray, contacts: np.ndarray) -> np.ndarray:
         """Weights (B, 2, 2: horizontal, vertical) after a frame with world soles (B, 2, 4, 4)
         and contacts (B, 2); a foot that touches down with no hold left takes its sole's x, y
-        and yaw."""
+        and yaw; a held one stays within the `leash` of the network's."""
         landing = contacts & (self.ramp <= 0.0)
         if landing.any():
             self.held[landing, :2] = soles[landing, :2, 3]
             self.held[landing, 2] = yaw_of(soles[landing, :3, :3])
+        self.held = leash(self.held, soles)
         self.ramp = np.clip(self.ramp + np.where(contacts, self.rate, -self.rate), 0.0, 1.0)
         low = (self.off_height - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * self.off_height)
         low = np.clip(low, 0.0, 1.0)
@@ -303,6 +311,23 @@ class SoleHolder:
         """(targets (B, 2, 4, 4) world, weights (B, 2, 2)) of one frame."""
         weight = self.advance(soles, contacts)
         return hold_targets(soles, self.held, weight), weight
+
+
+def leash(held: np.ndarray, soles: np.ndarray) -> np.ndarray:
+    """Held (x, y, yaw) (B, 2, 3) moved towards the network's soles (B, 2, 4, 4) just enough to
+    stay within `MAX_HOLD_GAP` of their origins horizontally and `MAX_HOLD_TURN` of their yaw:
+    a foot the network carries far from where it landed (a turn on the spot, a long shuffle) is
+    followed rather than held out of its leg's reach."""
+    out = held.copy()
+    gap = held[..., :2] - soles[..., :2, 3]
+    distance = np.linalg.norm(gap, axis=-1, keepdims=True)
+    out[..., :2] = soles[..., :2, 3] + gap * np.minimum(
+        1.0, MAX_HOLD_GAP / np.maximum(distance, 1e-12)
+    )
+    yaw = yaw_of(soles[..., :3, :3])
+    turn = np.arctan2(np.sin(held[..., 2] - yaw), np.cos(held[..., 2] - yaw))
+    out[..., 2] = yaw + np.clip(turn, -MAX_HOLD_TURN, MAX_HOLD_TURN)
+    return out
 
 
 def hold_targets(soles: np.ndarray, held: np.ndarray, weight: np.ndarray) -> np.ndarray:
