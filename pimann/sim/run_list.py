@@ -102,7 +102,7 @@ def simulate_runs(
             provenance = {
                 "model": run.model,
                 "seed": run.seed,
-                "scenario": run.scenario,
+                "scenario": run_key(run).scenario,  # <scenario>+<variant> for a variant
                 "steering": run.steering,
                 "controller": run.controller,
                 "variant": run.variant,
