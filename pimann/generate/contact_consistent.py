@@ -41,7 +41,14 @@ from pimann.core.contacts import FEET, contacts_from_heights, frame_period
 from pimann.core.errors import PimannError
 from pimann.core.params import ConsistentParams, ContactParams
 from pimann.core.robot import LEG_JOINTS, SOLE_CORNERS, Robot
-from pimann.core.rotations import quaternion_xyzw_matrices, rot_z, skew_part, vee, yaw_of
+from pimann.core.rotations import (
+    exp_so3,
+    quaternion_xyzw_matrices,
+    rot_z,
+    skew_part,
+    vee,
+    yaw_of,
+)
 from pimann.core.trajectory import Trajectory
 from pimann.generate.leg_odometry import SoleFrames
 from pimann.learn.kinematics_torch import TorchKinematics
@@ -73,6 +80,7 @@ LIFT_PRIORITY = 3.0
 MAX_HOLD_TURN = 0.5  # rad
 LEGS = np.array(LEG_JOINTS).reshape(2, 6)  # study joints of the left and the right leg
 _CORNERS = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homogeneous
+_EYE3, _EYE6 = np.eye(3), np.eye(6)
 
 
 def blend_frames(params: ConsistentParams, dt: float) -> int:
@@ -107,10 +115,25 @@ def interpolate(start: np.ndarray, end: np.ndarray, weight: np.ndarray) -> np.nd
     position = (1 - w[..., None]) * start[..., :3, 3] + w[..., None] * end[..., :3, 3]
     relative = np.swapaxes(start[..., :3, :3], -1, -2) @ end[..., :3, :3]
     shape = relative.shape[:-2]
-    rotvec = Rotation.from_matrix(relative.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
-    step = Rotation.from_rotvec((w[..., None] * rotvec).reshape(-1, 3)).as_matrix()
+    rotvec = _log_so3(relative.reshape(-1, 3, 3))
+    step = exp_so3((w.reshape(-1, 1) * np.broadcast_to(rotvec, (w.size, 3))).reshape(-1, 3))
     rotation = start[..., :3, :3] @ step.reshape(*shape, 3, 3)
     return homogeneous(position, rotation)
+
+
+def _log_so3(rotations: np.ndarray) -> np.ndarray:
+    """(N, 3) rotation vectors of rotations (N, 3, 3): vee(R - R^T) angle / (2 sin angle),
+    scipy's where the angle nears pi (its axis is not in the skew part there)."""
+    cosine = np.clip((np.trace(rotations, axis1=-2, axis2=-1) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cosine)
+    skew = vee(rotations - np.swapaxes(rotations, -1, -2))  # 2 sin(angle) axis
+    small = angle < 1e-6
+    factor = np.where(small, 0.5, angle / (2.0 * np.sin(np.where(small, 1.0, angle))))
+    out = factor[:, None] * skew
+    near_pi = angle > np.pi - 1e-3
+    if near_pi.any():
+        out[near_pi] = Rotation.from_matrix(rotations[near_pi]).as_rotvec()
+    return out
 
 
 def corner_distance(placement: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -182,12 +205,15 @@ class LegSolver:
         soles, axes, origins = self.chain(joints)
         jacobian = np.empty((*soles.shape[:2], 6, 6))
         lever = soles[..., None, :3, 3] - origins
-        jacobian[..., :3, :] = np.swapaxes(np.cross(axes, lever), -1, -2)
+        a, r = axes, lever  # a x r, component by component (np.cross is slow on small arrays)
+        jacobian[..., 0, :] = a[..., 1] * r[..., 2] - a[..., 2] * r[..., 1]
+        jacobian[..., 1, :] = a[..., 2] * r[..., 0] - a[..., 0] * r[..., 2]
+        jacobian[..., 2, :] = a[..., 0] * r[..., 1] - a[..., 1] * r[..., 0]
         target_t = np.swapaxes(targets[..., :3, :3], -1, -2)
         relative = target_t @ soles[..., :3, :3]
         trace = np.trace(relative, axis1=-2, axis2=-1)[..., None, None]
         jacobian[..., 3:, :] = (
-            0.5 * (trace * np.eye(3) - relative) @ target_t @ np.swapaxes(axes, -1, -2)
+            0.5 * (trace * _EYE3 - relative) @ target_t @ np.swapaxes(axes, -1, -2)
         )
         return jacobian
 
@@ -203,7 +229,7 @@ class LegSolver:
     def _step(jacobian: np.ndarray, error: np.ndarray, damping: np.ndarray) -> np.ndarray:
         """(B, 2, 6) the damped Gauss-Newton step (J^T J + lambda I) dq = -J^T e."""
         jacobian_t = np.swapaxes(jacobian, -1, -2)
-        normal = jacobian_t @ jacobian + damping[..., None, None] * np.eye(6)
+        normal = jacobian_t @ jacobian + damping[..., None, None] * _EYE6
         return np.linalg.solve(normal, -(jacobian_t @ error[..., None]))[..., 0]
 
     def _iterate(
