@@ -5,8 +5,10 @@
 rolls out every seed of the training output in every scenario of `rollout.scenario_names`
 and (`rollout.benchmark_clips`) every test clip's command-following script (clip_<clip name>)
 and (`rollout.benchmark_train_clips`) a few training clips' (train_<clip name>), with and
-without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, and records
-the models' meta in <out>/models.json (layout: pimann.core.rollout_files).
+without steering, into <out>/<seed>/<scenario>-<steering|nosteering>.h5, beside them the
+contact-consistent variants <scenario>+post and <scenario>+loop of rollout.consistent
+(docs/consistent.md), and records the models' meta in <out>/models.json (layout:
+pimann.core.rollout_files).
 """
 
 from __future__ import annotations

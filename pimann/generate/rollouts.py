@@ -5,6 +5,11 @@ pimann.core.rollout_files.
 Beside the scripts, each of the authors' test protocols (`rollout.protocols`) under its own
 name, with and without steering, each way with the rollout keys it sets.
 
+Beside the raw rollouts of the scenarios of `rollout.consistent.scenarios`, their
+contact-consistent variants (docs/consistent.md): `<scenario>+loop` generated with the hold
+inside the loop, `<scenario>+post` each raw one post-processed (ADHERENT's too, through
+`write_seed_rollouts`).
+
 The scripts are the named scenarios of `rollout.scenario_names` and, with
 `rollout.benchmark_clips`, the command-following benchmark's script of each test clip of the
 features stage's split (pimann.generate.benchmark_clips), with `rollout.benchmark_train_clips` also
