@@ -25,7 +25,7 @@ agree with its positions they agree with the new ones too, and a joint the corre
 alone (the upper body, a leg in swing) keeps the network's velocity exactly.
 
 Two ways: `make_consistent` post-processes a finished trajectory (every frame at once);
-`SoleHolder` does one step of a batch of rollouts, which the batched generator applies inside
+`InLoopHold` does one step of a batch of rollouts, which the batched generator applies inside
 its loop (pimann.generate.batch_generator, `consistent`) so that the network sees the held legs.
 """
 
@@ -53,7 +53,6 @@ from pimann.core.trajectory import Trajectory
 from pimann.generate.leg_odometry import SoleFrames
 from pimann.learn.kinematics_torch import TorchKinematics
 
-VARIANTS = ("post", "loop")  # the contact-consistent rollout variants beside the raw one
 # Gauss-Newton iterations beyond `iterations` for the frames whose held sole is still farther
 # than `tolerance` from its target (a long stance far from the network's foot); cheap, since
 # they run on those frames only, and only while each lowers the squared error below STALL x
@@ -65,11 +64,12 @@ STALL = 0.9
 # off height (a lift-off the rule sees when the network's foot does)
 FLAT_SHARE = 0.5
 # a held sole stays within this of the network's sole origin horizontally and of its yaw;
-# beyond, the hold follows the network's foot just enough (`leash`): tried on the retargeted
-# walks with a sideways drift, these hold every stance a leg can reach, where a leash on the
-# hip-to-sole distance (the leg's length) held less and a hold without leash stretched legs
-# out of reach on turns on the spot
+# beyond, the hold follows the network's foot just enough (`leash`). Tried on 36 retargeted
+# walks with a sideways drift: without a leash two clips (turns on the spot) stretched their
+# legs out of reach (up to 2.5x their raw sliding); with these none above 1.08x; a leash on
+# the hip-to-sole distance (the leg's length) held less (median 17.6 against 15.1)
 MAX_HOLD_GAP = 0.15  # m
+MAX_HOLD_TURN = 0.5  # rad
 # a lifting foot (vertical weight below the horizontal one) that its leg cannot reach weighs
 # its height and tilt this many times its horizontal place: it rises with the network's
 # foot, so the rule sees the lift-off when the network's does. Tried 1, 3, 10 (position-level
@@ -77,7 +77,6 @@ MAX_HOLD_GAP = 0.15  # m
 # with 1, 34.2 with 3 (raw 34.7); the retargeted walks' median 14.5 with 1, 14.6 with 3
 # (raw 14.8), 10 worse on both
 LIFT_PRIORITY = 3.0
-MAX_HOLD_TURN = 0.5  # rad
 LEGS = np.array(LEG_JOINTS).reshape(2, 6)  # study joints of the left and the right leg
 _CORNERS = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homogeneous
 _EYE3, _EYE6 = np.eye(3), np.eye(6)
