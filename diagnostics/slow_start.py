@@ -451,7 +451,8 @@ def first_seconds(probe: Probe) -> pd.DataFrame:
         table[f"{label}_vx_legs"] = (x[frames] - x[frames - every]) * probe.rate / every
         table[f"{label}_left_cm"] = 100 * probe.heights[frames, k, 0]
         table[f"{label}_right_cm"] = 100 * probe.heights[frames, k, 1]
-        turns = np.unwrap(np.nan_to_num(probe.phase[1:, k])) / (2 * np.pi)
+        phase = probe.phase[1:, k]
+        turns = np.unwrap(phase) / (2 * np.pi) if np.isfinite(phase).all() else phase
         table[f"{label}_phase"] = np.concatenate([[np.nan], turns])[frames]
     return pd.DataFrame(table)
 
@@ -536,7 +537,7 @@ def main(argv: list[str] | None = None) -> int:
     (authors,) = [s for s in params.rollout.protocols["authors"].script]
     slow, fast = (authors.vx if args.slow is None else args.slow), args.fast
     seconds = authors.duration if args.seconds is None else args.seconds
-    wide = pd.option_context("display.width", 200, "display.max_rows", 500)
+    wide = lambda: pd.option_context("display.width", 200, "display.max_rows", 500)  # noqa: E731
     try:
         if not args.no_data:
             collection = REPO_ROOT / params.features.input
@@ -547,7 +548,7 @@ def main(argv: list[str] | None = None) -> int:
                 f" (< {REST_SPEED} m/s over the first {REST_WINDOW_S} s); "
                 f"{int(rest['set_off_sampled'].sum())} stand >= 1 s, so a sample sees the set-off"
             )
-            with wide:
+            with wide():
                 print(rest.round(2).to_string(index=False))
             dataset = read_dataset(args.features)
             print(f"training samples of {args.features}:")
@@ -557,7 +558,7 @@ def main(argv: list[str] | None = None) -> int:
         for model_dir in args.model:
             probe = run_probe(model_dir, params, slow, fast, seconds, args.swap_s, robot)
             print(f"\n2. {model_dir}: the authors' unsteered test at {slow} and {fast} m/s")
-            with wide:
+            with wide():
                 print(first_seconds(probe).round(3).to_string(index=False))
                 print("the first input that carries the command, moved to each speed:")
                 print(first_input_response(probe).round(3).to_string(index=False))

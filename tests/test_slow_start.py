@@ -170,6 +170,7 @@ def test_probe_runs_adherent_through_its_own_generator(tiny_models, robot):
     assert not np.array_equal(probe.inputs[0][0], probe.inputs[0][1])
     assert (first_input_response(probe, [0.4])["step"] == 1).all()
     assert np.isnan(probe.phase).all() and np.isfinite(probe.predicted_vx[1:]).all()
+    assert first_seconds(probe)["slow_phase"].isna().all()  # no gait phase, none printed
 
 
 def test_a_missing_model_gets_one_line(tmp_path, capsys):
