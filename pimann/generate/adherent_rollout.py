@@ -39,10 +39,12 @@ Start (the authors' protocol: standing, the past from zeros): the standing pose 
 training data (its joints, roll and pitch; yaw 0), the lowest corner on the floor; the past as
 if standing for the last second (positions 0, directions (1, 0), velocities 0, BLF
 MANNTrajectoryGenerator::setInitialState). The first input's future half: `first_input`
-`"command"` (the default) the held command's future, as a joystick held when the generator
-starts puts it there; `"still"` standing still, BLF's reset input (its first setInput returns
-before touching the input: there is no output yet to blend). The rollout stage pairs them with
-the past velocities (`LOOP_FIRST_INPUT`): twist and command, zeros and still.
+`"command"` (the default) the held command's future, so that the very first step already
+answers the command; `"still"` standing still, BLF's reset input (its first setInput returns
+before touching the input: there is no output yet to blend; ADHERENT's python likewise starts
+from a standing input of its data and blends the joystick in from the second step). The
+rollout stage pairs them with the past velocities (`LOOP_FIRST_INPUT`): twist and command,
+zeros and still (BLF's loop as released).
 """
 
 from __future__ import annotations
