@@ -1,11 +1,13 @@
-"""DVC stage `rollout_adherent`: the ADHERENT baseline's rollouts, as BLF's MANNAutoregressive.
+"""DVC stage `rollout_adherent`: the ADHERENT baseline's rollouts, as its own generator.
 
     python stages/rollout_adherent.py --models models/adherent --out results/rollouts/adherent
 
 rolls out every seed in every script of pimann.generate.rollouts.rollout_scripts (the named
 scenarios and the benchmark clips) and each protocol of `rollout.protocols`, without steering
-(ADHERENT has none), into <out>/<seed>/<scenario>-nosteering.h5, and records the models' meta in
-<out>/models.json (pimann.generate.adherent_rollout).
+(ADHERENT has none), the past base velocities `rollout.adherent_past_velocity` (`twist`: its
+predicted twist fed back, as its python generator does; `zeros`: BLF's MANNAutoregressive), into
+<out>/<seed>/<scenario>-nosteering.h5, and records the models' meta in <out>/models.json
+(pimann.generate.adherent_rollout).
 """
 
 from __future__ import annotations
@@ -39,8 +41,9 @@ def main(argv: list[str] | None = None) -> None:
         REPO_ROOT / args.models, REPO_ROOT / args.out, params, cpu_workers(args.workers)
     )
     log.info(
-        "profile %s: %d rollouts -> %s in %.0f s",
+        "profile %s, past velocities %s: %d rollouts -> %s in %.0f s",
         params.profile,
+        params.rollout.adherent_past_velocity,
         len(written),
         args.out,
         time.perf_counter() - started,

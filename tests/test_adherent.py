@@ -14,12 +14,13 @@ from scipy.spatial.transform import Rotation
 
 from pimann.core.params import MotionSegment, ProtocolParams, load_params
 from pimann.core.paths import repo_path, repo_relative
-from pimann.core.robot import CHEST_FRAME, STANDING_JOINTS
+from pimann.core.robot import CHEST_FRAME, STANDING_JOINTS, load_robot
 from pimann.core.rollout_files import read_script, script_json
 from pimann.core.trajectory import Trajectory, read_trajectory
 from pimann.generate.adherent_rollout import (
     ADHERENT_CORNERS,
     AdherentGenerator,
+    AdherentNetwork,
     AdherentRun,
     command_future,
     generate_adherent,
@@ -31,6 +32,7 @@ from pimann.learn.adherent import (
     adherent_layout,
     build_adherent_dataset,
     clip_samples,
+    facing_direction,
     read_adherent_dataset,
 )
 from pimann.learn.adherent_train import load_adherent_model, train_adherent
@@ -343,6 +345,30 @@ def test_rollout_stage_writes_nosteering_files(trained, tmp_path):
     assert trajectory.attrs["steering"] == False and trajectory.attrs["seed"] == 1  # noqa: E712
     assert trajectory.attrs["pi_weight"] == 0.0
     assert read_script(trajectory) == script and trajectory.attrs["script"] == script_json(script)
+    # rollout.adherent_past_velocity picks the loop: BLF's (zeros, standing first input) here
+    zeros = dataclasses.replace(
+        params, rollout=dataclasses.replace(rollout, adherent_past_velocity="zeros")
+    )
+    run_adherent_rollouts(trained[1], tmp_path / "blf", zeros, workers=1)
+    blf = read_trajectory(tmp_path / "blf" / "1" / "forward-nosteering.h5")
+    model, layout, stats, meta = load_adherent_model(trained[1] / "1")
+    loops = {
+        loop: generate_adherent(
+            AdherentNetwork(model, stats),
+            layout,
+            [AdherentRun(script, "", {})],
+            load_robot(),
+            params.contacts,
+            _standing(meta),
+            loop,
+            first,
+        )[0]
+        for loop, first in (("twist", "command"), ("zeros", "still"))
+    }
+    for written_by, loop in ((trajectory, "twist"), (blf, "zeros")):
+        assert np.allclose(written_by.joint_positions, loops[loop].joint_positions, atol=1e-6)
+        assert np.allclose(written_by.base_position, loops[loop].base_position, atol=1e-6)
+    assert np.abs(blf.joint_positions - trajectory.joint_positions).max() > 1e-4
 
 
 def test_joystick_enters_the_future_half_as_blf_blends_it(robot):
@@ -375,3 +401,85 @@ def test_joystick_enters_the_future_half_as_blf_blends_it(robot):
     for b, block in enumerate(BLOCKS):
         future = fed[LAYOUT.x_slices[block]].reshape(-1, 2)[-6:]
         assert np.allclose(future, weights[b][:, None] * desired[0, b], atol=1e-12), block
+
+
+class Recording:
+    """The trained network, keeping every input it was given and every output it gave."""
+
+    def __init__(self, network: AdherentNetwork):
+        self.network, self.inputs, self.outputs = network, [], []
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        y = self.network(x)
+        self.inputs.append(x.copy())
+        self.outputs.append(y.copy())
+        return y
+
+
+@pytest.mark.parametrize("past_velocity", ["twist", "zeros"])
+def test_own_generator_feeds_back_its_twist_and_starts_on_the_command(
+    trained, robot, frames, past_velocity
+):
+    """A tiny trained model, two rows turning opposite ways: the first input's future half is
+    the command's own future and its past the standing second; from then on the past velocity
+    at offset 0 is the previous output's (vx, vy), from the ground base frame of the state
+    before it into the world and then into the new state's facing frame (the features'
+    v_i = (p_i - p_{i-1}) / dt in the window's frame, pimann.learn.adherent), and the one at
+    offset -10 the twist of 10 steps before, in the same new frame; BLF's zeros push 0."""
+    model, layout, stats, meta = load_adherent_model(trained[1] / "0")
+    network = Recording(AdherentNetwork(model, stats))
+    generator = AdherentGenerator(
+        network, layout, robot, CONTACT_PARAMS, _standing(meta), 2, past_velocity
+    )
+    velocity, yaw_rate = np.array([[0.4, 0.0], [0.3, 0.1]]), np.array([0.8, -0.8])
+    desired = command_future(velocity, yaw_rate, layout.future_offsets, RATE)
+    xs, ys, n = layout.x_slices, layout.y_slices, 40
+    offsets = np.array(layout.offsets)
+    now, before = int(np.flatnonzero(offsets == 0)[0]), int(np.flatnonzero(offsets == -10)[0])
+    world_twists, facing = [], []
+    for _ in range(n):
+        yaw = generator.yaw.copy()
+        generator.step(desired)
+        twist = network.outputs[-1][:, ys["base_twist"]][:, :2]
+        world_twists.append(np.einsum("bij,bj->bi", np.stack([planar(a) for a in yaw]), twist))
+        _, rotations = frames(generator.joints)
+        f = facing_direction(generator.rotation, rotations[:, 2])
+        facing.append(np.arctan2(f[:, 1], f[:, 0]))
+    first = network.inputs[0]
+    for b, block in enumerate(BLOCKS):
+        window = first[:, xs[block]].reshape(2, -1, 2)
+        assert np.allclose(window[:, -6:], desired[:, b], atol=1e-12), block
+        assert np.allclose(window[:, :-6], [0.0, 0.0] if b != 1 else [1.0, 0.0], atol=1e-9)
+    turned = 0.0
+    for step in range(1, n):
+        x = network.inputs[step]
+        past = x[:, xs["base_velocities"]].reshape(2, -1, 2)
+        to_local = np.stack([planar(a).T for a in facing[step - 1]])
+        if past_velocity == "zeros":
+            assert np.all(past[:, : now + 1] == 0.0)
+            continue
+        expected = np.einsum("bij,bj->bi", to_local, world_twists[step - 1])
+        assert np.abs(past[:, now] - expected).max() < 1e-9
+        if step > 10:
+            earlier = np.einsum("bij,bj->bi", to_local, world_twists[step - 11])
+            assert np.abs(past[:, before] - earlier).max() < 1e-9
+        turned = max(turned, np.abs(facing[step - 1]).max())
+    if past_velocity == "twist":
+        assert np.abs(np.array(world_twists)).max() > 0.05  # the twists pushed are not 0
+        assert turned > 0.01  # and the frame they are rotated into is not the world's
+
+
+def test_still_first_input_is_blfs_reset(trained, robot):
+    """`first_input="still"` keeps BLF's reset input: the first future half stands still."""
+    model, layout, stats, meta = load_adherent_model(trained[1] / "0")
+    network = Recording(AdherentNetwork(model, stats))
+    generator = AdherentGenerator(
+        network, layout, robot, CONTACT_PARAMS, _standing(meta), 1, "twist", "still"
+    )
+    desired = command_future(np.array([[0.4, 0.0]]), np.zeros(1), layout.future_offsets, RATE)
+    generator.step(desired)
+    still = command_future(np.zeros((1, 2)), np.zeros(1), layout.future_offsets, RATE)
+    for b, block in enumerate(BLOCKS):
+        future = network.inputs[0][:, layout.x_slices[block]].reshape(1, -1, 2)[:, -6:]
+        assert np.allclose(future, still[:, b])
+        assert b == 1 or not np.allclose(future, desired[:, b])  # directions: straight ahead

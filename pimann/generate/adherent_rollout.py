@@ -1,19 +1,23 @@
-"""Autoregressive generation with the ADHERENT baseline, as BLF's MANNAutoregressive does it
-(src/ML/src/MANNAutoregressive.cpp), vectorised over a batch of rollouts (rows), and the
-rollout stage's runner for it (`run_adherent_rollouts`).
+"""Autoregressive generation with the ADHERENT baseline, as its own generator rolls it out
+(the authors' python trajectory_generator.py over BLF's MANNAutoregressive step,
+src/ML/src/MANNAutoregressive.cpp), vectorised over a batch of rollouts (rows), and the rollout
+stage's runner for it (`run_adherent_rollouts`).
 
 One step (BLF MANNTrajectoryGenerator: setInput, then advance):
-1. setInput (after the first step): the joints and joint velocities are the last output's. The
-   facing frame of the state just generated (origin: the ground-projected base; x: unit(root x
-   axis + chest x axis), both projected) is the new local frame. The past (1 s + now, 51 frames
-   at 50 Hz, first in first out) gains the present: position (0, 0), facing direction (1, 0)
-   and base velocity ZERO as BLF pushes it (`past_velocity="zeros"`); `"twist"` pushes the
-   last predicted planar velocity instead (the authors' python trajectory_generator.py does,
-   and so the features do). Its samples every 10 frames (offsets -50..0) fill the input's past
-   half, in the new local frame. The future half is the output's future samples blended with
-   the joystick's: (1 - T_k) y_k + T_k d_k, T_k = ((k + 1) / 6)^tau, tau 1.5 (positions), 1.3
-   (directions), 1.3 (velocities) (trajectoryBlending). The robot counts as stopped when the
-   new input equals the previous one within 5 % (Eigen isApprox).
+1. setInput: the joints and joint velocities are the last output's. The facing frame of the
+   state just generated (origin: the ground-projected base; x: unit(root x axis + chest x
+   axis), both projected) is the new local frame. The past (1 s + now, 51 frames at 50 Hz,
+   first in first out) gains the present: position (0, 0), facing direction (1, 0) and a base
+   velocity, `past_velocity`: `"twist"` (`rollout.adherent_past_velocity`, the default) the
+   last output's planar twist, its (vx, vy) from the ground base frame of the state before it
+   into the world, as ADHERENT's python pushes it: so the sample at offset 0 is what the
+   features' velocity of that frame is, (p_i - p_{i-1}) / dt (pimann.learn.adherent), and
+   `"zeros"` zero as BLF's MANNAutoregressive pushes it. Its samples every 10 frames (offsets
+   -50..0) fill the input's past half, in the new facing frame. The future half is the
+   output's future samples blended with the joystick's: (1 - T_k) y_k + T_k d_k,
+   T_k = ((k + 1) / 6)^tau, tau 1.5 (positions), 1.3 (directions), 1.3 (velocities)
+   (trajectoryBlending). The robot counts as stopped when the new input equals the previous
+   one within 5 % (Eigen isApprox).
 2. advance: the network's output; the yaw integrates its yaw rate (0 while stopped), roll and
    pitch stay those of the start; the new joints are set and leg odometry places the base: the
    support foot is the one with the lowest sole corner, corners at (+-0.08, +-0.03, 0) m in the
@@ -31,9 +35,16 @@ velocity v and yaw rate w from the current facing frame, at each future offset t
 int_0^t R(w s) v ds, the direction (cos w t, sin w t) and the velocity R(w t) v; a stand
 command (or none) is standing still. ADHERENT has no steering.
 
-Start (BLF reset): the standing pose of the training data (its joints, roll and pitch; yaw 0),
-the lowest corner on the floor; the past as if standing for the last second; the first input's
-future half standing still too.
+Start (the authors' protocol: standing, the past from zeros): the standing pose of the
+training data (its joints, roll and pitch; yaw 0), the lowest corner on the floor; the past as
+if standing for the last second (positions 0, directions (1, 0), velocities 0, BLF
+MANNTrajectoryGenerator::setInitialState). The first input's future half: `first_input`
+`"command"` (the default) the held command's future, so that the very first step already
+answers the command; `"still"` standing still, BLF's reset input (its first setInput returns
+before touching the input: there is no output yet to blend; ADHERENT's python likewise starts
+from a standing input of its data and blends the joystick in from the second step). The
+rollout stage pairs them with the past velocities (`LOOP_FIRST_INPUT`): twist and command,
+zeros and still (BLF's loop as released).
 """
 
 from __future__ import annotations
@@ -78,7 +89,11 @@ log = logging.getLogger(__name__)
 ADHERENT_CORNERS = np.array([[x, y, 0.0] for x in (0.08, -0.08) for y in (0.03, -0.03)])
 BLEND_TAU = (1.5, 1.3, 1.3)  # positions, facing directions, velocities (BLF setInput)
 STOP_TOLERANCE = 0.05  # BLF setInput: isApprox with this relative precision
-PAST_VELOCITY = ("zeros", "twist")
+PAST_VELOCITY = ("twist", "zeros")  # rollout.adherent_past_velocity
+FIRST_INPUT = ("command", "still")
+# the rollout stage's loops: ADHERENT's own generator (its twist, the command from the first
+# input) and BLF's MANNAutoregressive (zeros, its reset input standing still)
+LOOP_FIRST_INPUT = {"twist": "command", "zeros": "still"}
 
 
 def _approx(a: np.ndarray, b: np.ndarray, tolerance: float) -> np.ndarray:
@@ -129,13 +144,17 @@ class AdherentGenerator:
         contact_params: ContactParams,
         standing: StandingPose,
         rows: int,
-        past_velocity: str = "zeros",
+        past_velocity: str = "twist",
+        first_input: str = "command",
     ):
-        if past_velocity not in PAST_VELOCITY:
-            raise PimannError(
-                None, f"past_velocity {past_velocity!r} is not one of {PAST_VELOCITY}"
-            )
-        self.network, self.layout, self.past_velocity = network, layout, past_velocity
+        for name, value, allowed in (
+            ("past_velocity", past_velocity, PAST_VELOCITY),
+            ("first_input", first_input, FIRST_INPUT),
+        ):
+            if value not in allowed:
+                raise PimannError(None, f"{name} {value!r} is not one of {allowed}")
+        self.network, self.layout = network, layout
+        self.past_velocity, self.first_input = past_velocity, first_input
         self.dt = 1.0 / float(layout.rate_hz)
         self.xs, self.ys = layout.x_slices, layout.y_slices
         self.frames = BodyFrames(robot)
@@ -234,8 +253,11 @@ class AdherentGenerator:
             1,
         )
         future = (1.0 - self.blend) * predicted + self.blend * desired
-        x = self._input(future)
-        self.stopped = np.ones(n, dtype=bool)
+        self._take(self._input(future))
+
+    def _take(self, x: np.ndarray) -> None:
+        """x becomes the input; stopped where it equals the previous one (BLF setInput)."""
+        self.stopped = np.ones(len(self.rows), dtype=bool)
         for block in (*self.xs,):
             self.stopped &= _approx(x[:, self.xs[block]], self.x[:, self.xs[block]], STOP_TOLERANCE)
         self.x = x
@@ -267,9 +289,12 @@ class AdherentGenerator:
         self.contacts = self.trigger.update(lowest_heights[..., 2].min(axis=2))
 
     def step(self, desired: np.ndarray) -> None:
-        """One frame of every row: setInput (from the second step on), then advance."""
+        """One frame of every row: setInput, then advance; the first input keeps the start's
+        past and takes `desired` as its future under `first_input="command"`."""
         if self.y is not None:
             self.set_input(desired)
+        elif self.first_input == "command":
+            self._take(self._input(desired))
         self.advance()
 
     def support_corner_world(self) -> np.ndarray:
@@ -294,7 +319,8 @@ def generate_adherent(
     robot: Robot,
     contact_params: ContactParams,
     standing: StandingPose,
-    past_velocity: str = "zeros",
+    past_velocity: str = "twist",
+    first_input: str = "command",
 ) -> list[Trajectory]:
     """Every run's script rolled out together; one trajectory per run (frame 0: the start)."""
     if not runs:
@@ -302,7 +328,7 @@ def generate_adherent(
     rate = float(layout.rate_hz)
     plan = ScriptSteps([run.script for run in runs], rate)
     generator = AdherentGenerator(
-        network, layout, robot, contact_params, standing, len(runs), past_velocity
+        network, layout, robot, contact_params, standing, len(runs), past_velocity, first_input
     )
     n = len(plan.active)
     record = {
@@ -378,7 +404,14 @@ def _seed_files(job: tuple[Path, dict[str, tuple[list[Segment], Path]], Params])
             for scenario, (script, _) in files.items()
         ]
         trajectories = generate_adherent(
-            AdherentNetwork(model, stats), layout, runs, load_robot(), params.contacts, standing
+            AdherentNetwork(model, stats),
+            layout,
+            runs,
+            load_robot(),
+            params.contacts,
+            standing,
+            params.rollout.adherent_past_velocity,
+            LOOP_FIRST_INPUT[params.rollout.adherent_past_velocity],
         )
         for (_, path), trajectory in zip(files.values(), trajectories, strict=True):
             write_trajectory(path, trajectory)
@@ -390,7 +423,8 @@ def _seed_files(job: tuple[Path, dict[str, tuple[list[Segment], Path]], Params])
 def run_adherent_rollouts(
     models_dir: str | Path, out_dir: str | Path, params: Params, workers: int = 2
 ) -> list[Path]:
-    """Every seed of models_dir x every script of `adherent_runs`, without steering, into
+    """Every seed of models_dir x every script of `adherent_runs`, without steering, through
+    the loop `params.rollout.adherent_past_velocity` names (`LOOP_FIRST_INPUT`), into
     out_dir/<seed>/<scenario>-nosteering.h5 and out_dir/models.json, written atomically."""
     scripts = adherent_runs(params)
 
