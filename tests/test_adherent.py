@@ -332,10 +332,14 @@ def test_rollout_stage_writes_nosteering_files(trained, tmp_path):
     out = tmp_path / "adherent"
     written = run_adherent_rollouts(trained[1], out, params, workers=1)
     names = sorted(p.relative_to(out).as_posix() for p in written)
-    assert names == [
+    assert names == [  # rollout.consistent: ADHERENT's files get the post-process beside them
+        "0/authors+post-nosteering.h5",
         "0/authors-nosteering.h5",
+        "0/forward+post-nosteering.h5",
         "0/forward-nosteering.h5",
+        "1/authors+post-nosteering.h5",
         "1/authors-nosteering.h5",
+        "1/forward+post-nosteering.h5",
         "1/forward-nosteering.h5",
     ]
     assert (out / "models.json").is_file()
