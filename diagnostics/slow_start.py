@@ -73,6 +73,7 @@ SET_OFF_DISTANCE = 0.02  # m from its first position: a clip has set off
 SLOW_BAND, FAST_BAND = (0.3, 0.5), (0.7, 0.9)  # m/s, the future window's forward speed
 SERIES_S, SERIES_EVERY_S = 2.0, 0.1  # the first seconds printed, one row every
 START_PHASES = (0.5 * np.pi, np.pi, 1.5 * np.pi)  # the slow run's other starts (rad)
+LIFT_HEIGHT = 0.02  # m, a foot's lowest corner above this has lifted (the contact rule's)
 RESPONSE_SPEEDS = np.round(np.arange(0.0, 1.01, 0.1), 2)
 
 
@@ -490,13 +491,15 @@ def _mean(values: np.ndarray) -> float:
 def outcomes(probe: Probe, walk_distance: float) -> pd.DataFrame:
     """Per probe row: forward distance, touchdowns (both feet), whether it walks (the evaluate
     stage's rule), the mean predicted forward velocity over the first and second second, the
-    highest foot lift over the first 2 s (cm) and the gait phase's turns over them."""
+    highest foot lift over the first 2 s (cm), when a foot first lifts above LIFT_HEIGHT (s)
+    and the gait phase's turns over the first 2 s."""
     second = round(probe.rate)
     rows = []
     for k, row in enumerate(probe.rows):
         distance = float(probe.position[-1, k, 0] - probe.position[0, k, 0])
         count = int(touchdowns(probe.contacts[:, k]).sum())
         predicted = probe.predicted_vx[:, k]
+        lifted = np.flatnonzero(probe.heights[:, k].max(axis=1) > LIFT_HEIGHT)
         phase = probe.phase[1 : 2 * second + 1, k]
         turns = (
             float((np.unwrap(phase)[-1] - phase[0]) / (2 * np.pi))
@@ -513,6 +516,7 @@ def outcomes(probe: Probe, walk_distance: float) -> pd.DataFrame:
                 "vx_net_0_1s": _mean(predicted[1 : second + 1]),
                 "vx_net_1_2s": _mean(predicted[second + 1 : 2 * second + 1]),
                 "lift_cm_2s": float(100 * probe.heights[: 2 * second + 1, k].max()),
+                "first_lift_s": float(lifted[0] / probe.rate) if len(lifted) else float("nan"),
                 "phase_turns_2s": turns,
             }
         )

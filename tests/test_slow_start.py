@@ -157,6 +157,9 @@ def test_probe_swaps_a_block_for_its_first_steps_and_starts_at_the_phase_given(t
     assert table.loc[0, "distance"] == pytest.approx(
         probe.position[-1, 0, 0] - probe.position[0, 0, 0]
     )
+    lifted = np.flatnonzero(probe.heights[:, 0].max(axis=1) > 0.02)
+    expected = lifted[0] / RATE if len(lifted) else np.nan
+    assert table.loc[0, "first_lift_s"] == pytest.approx(expected, nan_ok=True)
     series = first_seconds(probe)
     assert len(series) == 10 and series["t"].iloc[-1] == pytest.approx(1.0)
     assert np.isfinite(series.drop(columns=["slow_phase", "fast_phase"]).to_numpy()).all()
