@@ -152,6 +152,10 @@ def test_probe_swaps_a_block_for_its_first_steps_and_starts_at_the_phase_given(t
     response = first_input_response(probe, [0.4, 0.8])
     assert (response["step"] == 2).all()
     assert response["vx_net"].to_numpy() == pytest.approx(probe.predicted_vx[2, :2], abs=1e-6)
+    swept = [r for r in rows if r.name.startswith("command ")]
+    assert [r.speed for r in swept] == [0.2, 0.3, 0.5, 0.6, 0.7, 1.0] and not any(
+        r.donor for r in swept
+    )
     table = outcomes(probe, PARAMS.evaluate.walk_distance)
     assert list(table["row"]) == layout_names and table["walks"].dtype == bool
     assert table.loc[0, "distance"] == pytest.approx(
