@@ -23,9 +23,10 @@ prints:
    with one input block taken from the fast run at the same step for the first --swap-s
    seconds (and the fast run with the slow run's), then left to its own rules; the blocks:
    the velocity window's future half (the command), its past half, the joints, the joint
-   velocities, the gait phase and the fed-back pose; and the slow run started at other gait
-   phases. Each row: the forward distance in the test, touchdowns, whether it walks (the
-   evaluate stage's rule: `evaluate.walk_distance` and two touchdowns).
+   velocities, the gait phase and the fed-back pose; the slow run started at other gait
+   phases; and the same start at speeds from 0.2 to 1.0 m/s. Each row: the forward distance
+   in the test, touchdowns, whether it walks (the evaluate stage's rule:
+   `evaluate.walk_distance` and two touchdowns), when a foot first lifts.
 
 ADHERENT models (meta variant `adherent`) run through their own generator
 (pimann.generate.adherent_rollout, the loop `rollout.adherent_past_velocity` names), with its
@@ -73,6 +74,8 @@ SET_OFF_DISTANCE = 0.02  # m from its first position: a clip has set off
 SLOW_BAND, FAST_BAND = (0.3, 0.5), (0.7, 0.9)  # m/s, the future window's forward speed
 SERIES_S, SERIES_EVERY_S = 2.0, 0.1  # the first seconds printed, one row every
 START_PHASES = (0.5 * np.pi, np.pi, 1.5 * np.pi)  # the slow run's other starts (rad)
+SWEEP_SPEEDS = (0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 1.0)  # m/s, the start's other commands
+LIFT_HEIGHT = 0.02  # m, a foot's lowest corner above this has lifted (the contact rule's)
 RESPONSE_SPEEDS = np.round(np.arange(0.0, 1.01, 0.1), 2)
 
 
@@ -245,8 +248,9 @@ def adherent_blocks(names: Sequence[str], slices: dict[str, slice]) -> dict[str,
 def probe_rows(
     slow: float, fast: float, blocks: Sequence[str], swap_steps: Sequence[int], phases: bool
 ) -> list[Row]:
-    """The slow and fast runs (rows 0, 1), each block swapped both ways for each length, and
-    (`phases`) the slow run from other gait phases."""
+    """The slow and fast runs (rows 0, 1), each block swapped both ways for each length,
+    (`phases`) the slow run from other gait phases, and the same start at the other speeds of
+    SWEEP_SPEEDS (where the set-off appears)."""
     rows = [Row("slow", slow), Row("fast", fast)]
     for steps in swap_steps:
         for block in blocks:
@@ -254,6 +258,8 @@ def probe_rows(
             rows.append(Row(f"fast + slow's {block}", fast, 0, block, steps))
     if phases:
         rows += [Row(f"slow, start phase {a / np.pi:.1f} pi", slow, phase=a) for a in START_PHASES]
+    between = [v for v in SWEEP_SPEEDS if v not in (slow, fast)]
+    rows += [Row(f"command {v:.2f} m/s", v) for v in between]
     return rows
 
 
@@ -490,13 +496,15 @@ def _mean(values: np.ndarray) -> float:
 def outcomes(probe: Probe, walk_distance: float) -> pd.DataFrame:
     """Per probe row: forward distance, touchdowns (both feet), whether it walks (the evaluate
     stage's rule), the mean predicted forward velocity over the first and second second, the
-    highest foot lift over the first 2 s (cm) and the gait phase's turns over them."""
+    highest foot lift over the first 2 s (cm), when a foot first lifts above LIFT_HEIGHT (s)
+    and the gait phase's turns over the first 2 s."""
     second = round(probe.rate)
     rows = []
     for k, row in enumerate(probe.rows):
         distance = float(probe.position[-1, k, 0] - probe.position[0, k, 0])
         count = int(touchdowns(probe.contacts[:, k]).sum())
         predicted = probe.predicted_vx[:, k]
+        lifted = np.flatnonzero(probe.heights[:, k].max(axis=1) > LIFT_HEIGHT)
         phase = probe.phase[1 : 2 * second + 1, k]
         turns = (
             float((np.unwrap(phase)[-1] - phase[0]) / (2 * np.pi))
@@ -513,6 +521,7 @@ def outcomes(probe: Probe, walk_distance: float) -> pd.DataFrame:
                 "vx_net_0_1s": _mean(predicted[1 : second + 1]),
                 "vx_net_1_2s": _mean(predicted[second + 1 : 2 * second + 1]),
                 "lift_cm_2s": float(100 * probe.heights[: 2 * second + 1, k].max()),
+                "first_lift_s": float(lifted[0] / probe.rate) if len(lifted) else float("nan"),
                 "phase_turns_2s": turns,
             }
         )

@@ -152,11 +152,18 @@ def test_probe_swaps_a_block_for_its_first_steps_and_starts_at_the_phase_given(t
     response = first_input_response(probe, [0.4, 0.8])
     assert (response["step"] == 2).all()
     assert response["vx_net"].to_numpy() == pytest.approx(probe.predicted_vx[2, :2], abs=1e-6)
+    swept = [r for r in rows if r.name.startswith("command ")]
+    assert [r.speed for r in swept] == [0.2, 0.3, 0.5, 0.6, 0.7, 1.0] and not any(
+        r.donor for r in swept
+    )
     table = outcomes(probe, PARAMS.evaluate.walk_distance)
     assert list(table["row"]) == layout_names and table["walks"].dtype == bool
     assert table.loc[0, "distance"] == pytest.approx(
         probe.position[-1, 0, 0] - probe.position[0, 0, 0]
     )
+    lifted = np.flatnonzero(probe.heights[:, 0].max(axis=1) > 0.02)
+    expected = lifted[0] / RATE if len(lifted) else np.nan
+    assert table.loc[0, "first_lift_s"] == pytest.approx(expected, nan_ok=True)
     series = first_seconds(probe)
     assert len(series) == 10 and series["t"].iloc[-1] == pytest.approx(1.0)
     assert np.isfinite(series.drop(columns=["slow_phase", "fast_phase"]).to_numpy()).all()
