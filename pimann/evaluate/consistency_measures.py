@@ -2,7 +2,8 @@
 the sliding measures, for every rollout (raw ones too, where they apply).
 
 - `rollout_variant`: raw, post or loop (the scenario's suffix, pimann.core.rollout_files);
-- `penetration_max_m`: how far the lowest sole corner goes below the floor (0: never);
+- `penetration_max_m`: how far the lowest sole corner goes below the floor (0: never; measured
+  by pimann.evaluate.metrics.trajectory_metrics on the soles of its pass);
 - `joint_distance_rms_rad`, `joint_distance_max_rad`: the joints' distance to the raw twin
   (the same model, seed, scenario and steering), RMS and largest over every frame and joint;
   empty for a raw rollout;
@@ -32,25 +33,24 @@ COLUMNS = (
 
 
 def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
-    """The columns of one rollout (read with its raw twin where it is a variant)."""
-    from pimann.core.contacts import foot_kinematics, trajectory_configurations
-    from pimann.core.robot import load_robot
+    """The columns of one rollout but the penetration (`trajectory_metrics`' pass has the
+    soles): a variant read with its raw twin; a raw rollout is not read."""
     from pimann.core.trajectory import read_trajectory
 
     root, key = job
-    robot = load_robot("retarget")
-    trajectory = read_trajectory(rollout_path(root, key))
-    heights = foot_kinematics(robot, trajectory_configurations(robot, trajectory)).heights
     scenario, variant = split_variant(key.scenario)
     out: dict[str, Any] = {
         "rollout_variant": variant,
-        "penetration_max_m": float(max(0.0, -heights.min())),
         "joint_distance_rms_rad": None,
         "joint_distance_max_rad": None,
-        "consistent_residual_max_m": trajectory.attrs.get("consistent_residual_max_m"),
+        "consistent_residual_max_m": None,
     }
+    if variant == RAW:
+        return out
+    trajectory = read_trajectory(rollout_path(root, key))
+    out["consistent_residual_max_m"] = trajectory.attrs.get("consistent_residual_max_m")
     twin = rollout_path(root, dataclasses.replace(key, scenario=scenario))
-    if variant != RAW and twin.is_file():
+    if twin.is_file():
         raw = read_trajectory(twin).joint_positions
         frames = min(len(raw), len(trajectory))
         distance = trajectory.joint_positions[:frames] - raw[:frames]
@@ -59,8 +59,12 @@ def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
     return out
 
 
-def consistency_columns(root: str | Path, keys: list[RolloutKey], workers: int = 1) -> pd.DataFrame:
-    """`COLUMNS` of each rollout of `keys` under `root`, one row each, in order."""
+def with_consistency_columns(
+    frame: pd.DataFrame, root: str | Path, keys: list[RolloutKey], workers: int = 1
+) -> pd.DataFrame:
+    """`frame` (one row per rollout of `keys` under `root`, in order, with `trajectory_metrics`'
+    `penetration_max_m`) with `COLUMNS` last, in their order."""
     jobs = [(Path(root), key) for key in keys]
-    rows = pool_map(_measures, jobs, workers, "consistency measures")
-    return pd.DataFrame(rows, columns=list(COLUMNS))
+    rows = pd.DataFrame(pool_map(_measures, jobs, workers, "consistency measures"))
+    frame = pd.concat([frame, rows.set_index(frame.index)], axis=1)
+    return frame[[c for c in frame if c not in COLUMNS] + list(COLUMNS)]

@@ -49,7 +49,7 @@ from pimann.evaluate.claims import (
     claims_markdown,
     evaluate_claims,
 )
-from pimann.evaluate.consistency_measures import consistency_columns
+from pimann.evaluate.consistency_measures import with_consistency_columns
 from pimann.evaluate.gait import GAIT_SUMMARY, with_data_gait
 from pimann.evaluate.metrics import aggregate
 
@@ -127,8 +127,8 @@ def collect_metrics(rollouts_dir: str | Path, params: Params, workers: int = 2) 
         {**columns, **{k: v for k, v in metrics.items() if k != "source"}}
         for columns, metrics in zip(rollout_columns(root, rollouts), results, strict=True)
     ]
-    consistency = consistency_columns(root, [key for key, _ in rollouts], workers)
-    return sort_rows(pd.concat([pd.DataFrame(rows), consistency], axis=1))
+    keys = [key for key, _ in rollouts]
+    return sort_rows(with_consistency_columns(pd.DataFrame(rows), root, keys, workers))
 
 
 def sort_rows(frame: pd.DataFrame) -> pd.DataFrame:

@@ -359,6 +359,8 @@ def trajectory_metrics(
     walked = final[0] >= params.walk_distance and metrics["touchdowns"] >= WALK_TOUCHDOWNS
     metrics["walks"] = bool(walked)
     metrics.update(gait)
+    # how far the lowest sole corner goes below the floor (a contact-consistent variant's check)
+    metrics["penetration_max_m"] = float(max(0.0, -a.feet.heights.min()))
     return metrics
 
 
