@@ -349,14 +349,7 @@ def run_probe(
     series = [first]
     with torch.inference_mode():
         for k in range(1, len(plan.active)):
-            generator.step(
-                k,
-                plan.velocity[k],
-                plan.yaw_rate[k],
-                plan.stand[k],
-                plan.changed[k],
-                plan.active[k],
-            )
+            generator.step(k, *plan.at(k))
             series.append(record())
     position, heights, contacts = (np.stack(part) for part in zip(*series, strict=True))
     outputs = np.stack(swapping.outputs)

@@ -104,14 +104,7 @@ def forced_rollouts(
     record = {name: [] for name in ("position", "rotation", "joints", "contacts")}
     with torch.inference_mode():
         for k in range(1, length + 1):
-            generator.step(
-                k,
-                plan.velocity[k],
-                plan.yaw_rate[k],
-                plan.stand[k],
-                plan.changed[k],
-                plan.active[k],
-            )
+            generator.step(k, *plan.at(k))
             for name, values in record.items():
                 values.append(np.array(getattr(generator, name)))
     arrays = {name: np.stack(values, axis=1) for name, values in record.items()}

@@ -163,10 +163,7 @@ def test_in_loop_holds_the_soles_the_network_sees(robot, params):
         )
         held, soles = [], []
         for k in range(1, len(plan.active)):
-            generator.step(
-                k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k], plan.changed[k],
-                plan.active[k],
-            )  # fmt: skip
+            generator.step(k, *plan.at(k))
             if consistent is not None:  # both weights 1: held flat where it landed
                 held.append(generator.hold.weights.min(axis=-1) >= 1.0)
             frame = []

@@ -110,9 +110,7 @@ def oracle_rollout(robot, clips, starts, variant, steps, gait_phase=False):
     plan = ScriptSteps([[MotionSegment(steps / 50.0, 0.5, 0.0, 0.0)]] * len(clips), 50.0)
     joints, rotations, positions = [], [], []
     for k in range(1, steps + 1):
-        generator.step(
-            k, plan.velocity[k], plan.yaw_rate[k], plan.stand[k], plan.changed[k], plan.active[k]
-        )
+        generator.step(k, *plan.at(k))
         joints.append(generator.joints.copy())
         rotations.append(generator.rotation.copy())
         positions.append(generator.position.copy())

@@ -87,6 +87,11 @@ class ScriptSteps:
             self.changed[frames, row] = np.diff(steps, prepend=-1) != 0
         self.active = np.arange(n + 1)[:, None] <= self.lengths[None, :]
 
+    def at(self, k: int) -> tuple[np.ndarray, ...]:
+        """Step k's command per row, as `BatchGenerator.step` takes it after k: velocity, yaw
+        rate, stand, changed, active."""
+        return self.velocity[k], self.yaw_rate[k], self.stand[k], self.changed[k], self.active[k]
+
 
 # cutting a clip into commands
 VELOCITY_STEP = 0.15  # m/s: a sixth of the data's walking speed (0.9 m/s), 1.5x the standing

@@ -187,14 +187,7 @@ def generate_batch(
     with torch.inference_mode(), _blas().limit(limits=1, user_api="blas"):
         for k in range(n):
             if k > 0:
-                generator.step(
-                    k,
-                    plan.velocity[k],
-                    plan.yaw_rate[k],
-                    plan.stand[k],
-                    plan.changed[k],
-                    plan.active[k],
-                )
+                generator.step(k, *plan.at(k))
             clock = time.perf_counter()
             for name in names:
                 out[name][k] = getattr(generator, name)
