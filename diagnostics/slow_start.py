@@ -41,6 +41,7 @@ import dataclasses
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -351,22 +352,7 @@ def run_probe(
         for k in range(1, len(plan.active)):
             generator.step(k, *plan.at(k))
             series.append(record())
-    position, heights, contacts = (np.stack(part) for part in zip(*series, strict=True))
-    outputs = np.stack(swapping.outputs)
-    nan = np.full((1, len(rows)), np.nan)
-    return Probe(
-        rows,
-        rate,
-        position,
-        heights,
-        contacts,
-        np.concatenate([nan, np.stack([predicted_vx(y) for y in outputs])]),
-        np.concatenate([nan, np.stack([phase_of(y) for y in outputs])]),
-        swapping.inputs,
-        network,
-        predicted_vx,
-        lambda y: np.sqrt((y[:, legs] ** 2).mean(axis=1)),
-    )
+    return _probe(rows, rate, series, swapping, network, predicted_vx, phase_of, legs)
 
 
 def _adherent_probe(
@@ -414,13 +400,31 @@ def _adherent_probe(
             command_future(plan.velocity[k], plan.yaw_rate[k], layout.future_offsets, rate)
         )
         series.append(record())
-    position, heights, contacts = (np.stack(part) for part in zip(*series, strict=True))
-    outputs = np.stack(swapping.outputs)
-    nan = np.full((1, len(rows)), np.nan)
 
     def predicted_vx(y: np.ndarray) -> np.ndarray:
         return y[:, ys["base_twist"]][:, 0]
 
+    def no_phase(y: np.ndarray) -> np.ndarray:
+        return np.full(len(y), np.nan)
+
+    return _probe(rows, rate, series, swapping, network, predicted_vx, no_phase, legs)
+
+
+def _probe(
+    rows: Sequence,
+    rate: float,
+    series: list[tuple[np.ndarray, ...]],
+    swapping: Swapping,
+    network: Any,
+    predicted_vx: Callable,
+    phase_of: Callable,
+    legs: np.ndarray,
+) -> Probe:
+    """A `Probe` of the recorded series (position, lowest corner heights, contacts a frame)
+    and the network's outputs at each step, the first frame's predictions NaN."""
+    position, heights, contacts = (np.stack(part) for part in zip(*series, strict=True))
+    outputs = np.stack(swapping.outputs)
+    nan = np.full((1, len(rows)), np.nan)
     return Probe(
         rows,
         rate,
@@ -428,7 +432,7 @@ def _adherent_probe(
         heights,
         contacts,
         np.concatenate([nan, np.stack([predicted_vx(y) for y in outputs])]),
-        np.full(position.shape[:2], np.nan),
+        np.concatenate([nan, np.stack([phase_of(y) for y in outputs])]),
         swapping.inputs,
         network,
         predicted_vx,

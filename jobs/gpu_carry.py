@@ -72,16 +72,20 @@ def _raw_params(root: Path) -> dict:
     return yaml.safe_load((root / "params.yaml").read_text())
 
 
-def _tree_bytes(root: Path) -> int:
-    """What every call sends anyway: tracked files and untracked ones git does not ignore."""
+def _tree_files(root: Path) -> list[str]:
+    """What every call sends: tracked files and untracked ones git does not ignore."""
     listed = subprocess.run(
         ["git", "ls-files", "-z", "-co", "--exclude-standard"],
         cwd=root,
         capture_output=True,
         check=True,
     ).stdout
-    names = [n for n in listed.decode().split("\0") if n]
-    return sum((root / n).stat().st_size for n in names if (root / n).is_file())
+    return [n for n in listed.decode().split("\0") if n and (root / n).is_file()]
+
+
+def _tree_bytes(root: Path) -> int:
+    """What every call sends anyway, in bytes (`_tree_files`)."""
+    return sum((root / n).stat().st_size for n in _tree_files(root))
 
 
 def _inputs(
@@ -340,17 +344,10 @@ SMOKE_PROFILE = {
 
 
 def _tree_copy(root: Path, target: Path) -> None:
-    """The device's copy: tracked files and untracked ones git does not ignore."""
-    listed = subprocess.run(
-        ["git", "ls-files", "-z", "-co", "--exclude-standard"],
-        cwd=root,
-        capture_output=True,
-        check=True,
-    ).stdout
-    for name in filter(None, listed.decode().split("\0")):
-        if (root / name).is_file():
-            (target / name).parent.mkdir(parents=True, exist_ok=True)
-            shutil.copy2(root / name, target / name)
+    """The device's copy of what a call sends (`_tree_files`)."""
+    for name in _tree_files(root):
+        (target / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(root / name, target / name)
 
 
 def smoke(root: Path, work: Path, features: Path | None = None) -> dict:
