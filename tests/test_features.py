@@ -345,3 +345,65 @@ def test_time_reversed_training_clips_walk_backward_beside_their_original(params
     sources = dict(zip(dataset.clips, dataset.sources, strict=True))
     for name in reversed_names:
         assert sources[name] == sources[name.removesuffix("~reversed")]
+
+
+def _set_off_clip(rest_frames: int, speed: float, frames: int = 200) -> Trajectory:
+    """A synthetic clip standing for `rest_frames` frames, then walking forward at `speed`."""
+    clip = synthetic_clip(frames, np.array([speed, 0.0, 0.0]), 0.0, source="starter")
+    moving = np.clip(np.arange(frames) - rest_frames, 0, None) / RATE
+    position = clip.base_position.copy()
+    position[:, 0] = speed * moving
+    return dataclasses.replace(clip, base_position=position)
+
+
+def test_a_clip_from_rest_is_sampled_from_its_first_frame_with_a_past_at_rest(params):
+    """With rest_start_padding, a clip that starts from rest is preceded by its first frame
+    held for the past window: its first sample is at its own frame 0 with a past window of
+    zero velocity and the clip's own future, as a rollout's start; a moving clip is not."""
+    from pimann.learn.features import rest_padded, starts_from_rest
+
+    layout = window_layout(params.features, RATE, "full")
+    pad = 1 - min(layout.input_offsets)
+    starter = _set_off_clip(rest_frames=20, speed=0.4)
+    walker = synthetic_clip(200, np.array([0.4, 0.0, 0.0]), 0.0)
+    assert starts_from_rest(starter) and not starts_from_rest(walker)
+    padded = rest_padded(starter, pad)
+    assert len(padded) == len(starter) + pad
+    np.testing.assert_allclose(np.diff(padded.time), 1 / RATE)
+    np.testing.assert_array_equal(padded.base_position[pad:], starter.base_position)
+    np.testing.assert_array_equal(padded.joint_positions[:pad], starter.joint_positions[[0] * pad])
+    x, y, steps = clip_features(padded, layout)
+    x_plain, y_plain, steps_plain = clip_features(starter, layout)
+    assert steps[0] == pad and len(steps) == len(steps_plain) + pad  # from the clip's frame 0
+    linear = x[:, layout.x_slices["base_linear_window"]].reshape(len(x), -1, 3)
+    past = np.asarray(layout.input_offsets) <= 0
+    np.testing.assert_allclose(linear[0, past], 0.0, atol=1e-12)  # standing until frame 0
+    # the first future sample walks: the clip moves from frame 21 on (offset 0.4 s = frame 20,
+    # a difference ending there is still 0; offset 0.6 s = frame 30 is 0.4 m/s forward)
+    offsets = np.asarray(layout.input_offsets)
+    np.testing.assert_allclose(linear[0, offsets == 30, 0], 0.4 * np.cos(PITCH), atol=1e-9)
+    # the samples the plain clip has are unchanged
+    np.testing.assert_allclose(x[-len(x_plain) :], x_plain, atol=1e-12)
+    np.testing.assert_allclose(y[-len(y_plain) :], y_plain, atol=1e-12)
+
+
+def test_rest_start_padding_adds_set_offs_in_the_clips_own_frames(params):
+    clips = synthetic_collection(n_sources=4)
+    clips[0] = ("src0", _set_off_clip(rest_frames=20, speed=0.4))
+    clips[0] = ("src0", dataclasses.replace(clips[0][1], source="src0"))
+    plain_params = dataclasses.replace(params.features, rest_start_padding=False)
+    plain = build_dataset(clips, plain_params, "full")
+    padded = build_dataset(
+        clips, dataclasses.replace(plain_params, rest_start_padding=True), "full"
+    )
+    k = padded.clips.index("src0")
+    origin = np.concatenate([padded.train_origin, padded.test_origin])
+    plain_origin = np.concatenate([plain.train_origin, plain.test_origin])
+    steps = origin[origin[:, 0] == k, 1]
+    plain_steps = plain_origin[plain_origin[:, 0] == k, 1]
+    assert steps.min() == 0 and plain_steps.min() == 51 and steps.max() == plain_steps.max()
+    for other in range(1, len(clips)):  # the moving clips keep their samples
+        np.testing.assert_array_equal(
+            origin[origin[:, 0] == other, 1], plain_origin[plain_origin[:, 0] == other, 1]
+        )
+    assert padded.standing == plain.standing  # the held frames do not weigh on the pose
