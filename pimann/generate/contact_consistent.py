@@ -505,11 +505,12 @@ class InLoopHold:
         targets, weights = self.holder.step(soles, contacts)
         self.weights = weights
         held = weights.min(axis=-1) >= 1.0
+        active = weights.max(axis=-1) > 0.0
         solution = self.solver.solve(
             joints,
             inverse(base)[:, None] @ targets,
-            weights.max(axis=-1) > 0.0,
-            held,
+            active,
+            active,
             weights[..., 1] < weights[..., 0],
         )
         correction = (solution.joints - joints)[:, LEG_JOINTS]
