@@ -137,10 +137,10 @@ def test_leg_ik_reaches_pinocchio_placements(robot, params):
     assert solution.residual.max() < 1e-6
 
 
-def test_in_loop_holds_the_soles_the_network_sees(robot, params):
-    """Inside the batched generator (the analytic gait model, a batch of two): a sole held (both
-    weights 1) stays within 1 mm of where it landed, by pinocchio's FK of the state fed back;
-    the raw rollout's soles glide there."""
+def _in_loop(robot, params, consistent):
+    """The analytic gait model's batch of two (unsteered, steered) stepped through a 4-s walk:
+    (world soles of the recorded legs (T, rows, 2, 3), held flags (T, rows, 2) or None, the
+    network's inputs (T, rows, in), the generator)."""
     from builders import IDENTITY, LAYOUT
 
     from pimann.generate.batch_generator import BatchGenerator
@@ -148,37 +148,63 @@ def test_in_loop_holds_the_soles_the_network_sees(robot, params):
     from pimann.learn.standing import StandingPose
 
     plan = ScriptSteps([[MotionSegment(4.0, 0.4, 0.0, 0.0)]] * 2, LAYOUT.rate_hz)
-    glides = {}
-    for consistent in (None, params.rollout.consistent):
-        generator = BatchGenerator(
-            GaitModel(robot),
-            LAYOUT,
-            IDENTITY,
-            params.rollout,
-            np.array([False, True]),
-            robot,
-            params.contacts,
-            StandingPose.nominal(),
-            consistent,
-        )
-        held, soles = [], []
-        for k in range(1, len(plan.active)):
-            generator.step(k, *plan.at(k))
-            if consistent is not None:  # both weights 1: held flat where it landed
-                held.append(generator.hold.weights.min(axis=-1) >= 1.0)
-            frame = []
-            for row in range(2):
-                q = robot.configuration(
-                    generator.position[row],
-                    Rotation.from_matrix(generator.rotation[row]).as_quat(),
-                    generator.joints[row],
-                )
-                frame.append([robot.frame_placement(q, f).translation for f in FEET])
-            soles.append(frame)
-        soles = np.array(soles)  # (T, rows, 2, 3)
-        glides[consistent is not None] = soles, np.array(held) if held else None
-    soles, held = glides[True]
-    raw_soles = glides[False][0]
+    generator = BatchGenerator(
+        GaitModel(robot),
+        LAYOUT,
+        IDENTITY,
+        params.rollout,
+        np.array([False, True]),
+        robot,
+        params.contacts,
+        StandingPose.nominal(),
+        consistent,
+    )
+    network, inputs = generator.network, []
+
+    def recorded(x):
+        inputs.append(x.copy())
+        return network(x)
+
+    generator.network = recorded
+    held, soles = [], []
+    for k in range(1, len(plan.active)):
+        generator.step(k, *plan.at(k))
+        if consistent is not None:  # both weights 1: held flat where it landed
+            held.append(generator.hold.weights.min(axis=-1) >= 1.0)
+        frame = []
+        for row in range(2):
+            q = robot.configuration(
+                generator.position[row],
+                Rotation.from_matrix(generator.rotation[row]).as_quat(),
+                generator.held_joints[row] if consistent is not None else generator.joints[row],
+            )
+            frame.append([robot.frame_placement(q, f).translation for f in FEET])
+        soles.append(frame)
+    held = np.array(held) if held else None
+    return np.array(soles), held, np.array(inputs), generator
+
+
+def test_in_loop_feeds_the_network_its_own_legs(robot, params):
+    """In the loop the network sees what it sees without the hold (its own legs; unsteered, the
+    base the leg odometry places on the held feet is not an input), while the legs recorded
+    are the held ones: soles held within 1 mm, and the legs really corrected."""
+    _, _, raw_inputs, _ = _in_loop(robot, params, None)
+    soles, held, inputs, generator = _in_loop(robot, params, params.rollout.consistent)
+    np.testing.assert_array_equal(inputs[:, 0], raw_inputs[:, 0])  # the unsteered row
+    assert not np.array_equal(generator.held_joints, generator.joints)
+    for foot in range(2):
+        for a, b in true_runs(held[:, 0, foot]):
+            drift = np.linalg.norm(soles[a:b, 0, foot] - soles[a, 0, foot], axis=1)
+            assert drift.max() < 1e-3, (foot, a, b, drift.max())
+            np.testing.assert_allclose(soles[a:b, 0, foot, 2], 0.0, atol=1e-3)
+
+
+def test_in_loop_holds_the_soles_it_records(robot, params):
+    """Inside the batched generator (the analytic gait model, a batch of two): a sole held (both
+    weights 1) stays within 1 mm of where it landed, by pinocchio's FK of the held legs at the
+    base the leg odometry placed; the raw rollout's soles glide there."""
+    raw_soles = _in_loop(robot, params, None)[0]
+    soles, held, _, generator = _in_loop(robot, params, params.rollout.consistent)
     worst, raw_worst = 0.0, 0.0
     for row in range(2):
         for foot in range(2):

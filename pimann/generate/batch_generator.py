@@ -123,8 +123,10 @@ class BatchGenerator:
         standing: StandingPose,
         consistent: ConsistentParams | None = None,
     ):
-        """`consistent`: hold each foot in contact where it landed and feed the held legs back
-        (pimann.generate.contact_consistent; None: the network's legs, the raw rollout)."""
+        """`consistent`: hold each foot in contact where it landed (pimann.generate.
+        contact_consistent): the held legs in `held_joints` and `held_joint_velocities`, the leg
+        odometry anchored on the held feet, the network fed its own legs (None: no hold, the
+        raw rollout)."""
         rows = len(steering)
         self.params, self.network = params, RolloutNetwork(model, layout, stats)
         self.steering = np.asarray(steering, dtype=bool)
@@ -186,6 +188,10 @@ class BatchGenerator:
         self.stop_step, self.blending = np.zeros(rows, dtype=int), np.zeros(rows, dtype=bool)
         self.stop_joints, self.stop_roll_pitch = self.joints.copy(), np.zeros((rows, 2))
         self.hold = None
+        # the legs held where the feet landed (`consistent`): what the rollout records; the
+        # network is fed its own (self.joints), as without the hold
+        self.held_joints = self.joints.copy()
+        self.held_joint_velocities = self.joint_velocities.copy()
         if consistent is not None:
             self.hold = InLoopHold(robot, rows, consistent, contact_params, self.dt)
             self.timings["consistent"] = 0.0  # timed too: the hold's share of a step
@@ -227,6 +233,8 @@ class BatchGenerator:
             self.phase = unit_phase(phase)
         self.joints = np.array(joints, float)
         self.joint_velocities = np.array(joint_velocities, float)
+        self.held_joints = self.joints.copy()
+        self.held_joint_velocities = self.joint_velocities.copy()
         self.fed_position, self.fed_rpy = np.array(fed_position, float), np.array(fed_rpy, float)
         self.rotation = np.array(rotation, float)
         self.next_rotation = np.array(next_rotation, float)
@@ -436,13 +444,16 @@ class BatchGenerator:
         self._lap("commands")
 
     def _hold(self) -> None:
-        """The feet in contact held where they landed: the legs re-solved, their joint
-        velocities corrected, and the leg odometry's feet moved to where the legs put them (its
-        later anchors); what the network sees at the next step."""
-        self.joints, self.joint_velocities = self.hold.apply(
+        """The feet in contact held where they landed: the legs re-solved and their joint
+        velocities corrected into `held_joints` and `held_joint_velocities` (what the rollout
+        records), and the leg odometry's feet moved to where the held legs put them, so that
+        its next anchor (a support switch) is a held foot. The network is fed its own legs
+        (self.joints): fed the held ones it undoes the hold and stops walking
+        (docs/consistent.md)."""
+        self.held_joints, self.held_joint_velocities = self.hold.apply(
             self.position, self.rotation, self.joints, self.joint_velocities, self.contacts
         )
-        corners = self.odometry.rotated_corners(self.rotation, self.joints)
+        corners = self.odometry.rotated_corners(self.rotation, self.held_joints)
         self.odometry.world_corners = corners + self.position[:, None, :, None]
 
     def _feedback(self, any_stopped: bool) -> None:

@@ -138,8 +138,9 @@ def generate_batch(
     """Roll the network out over every row's script at once; one `Rollout` per row, in order.
 
     `consistent`: contact-consistent rollouts, each foot in contact held where it landed inside
-    the loop (pimann.generate.contact_consistent; attrs `consistent` = "loop", contacts: the
-    rule on the file's own soles); None: the raw rollouts.
+    the loop (pimann.generate.contact_consistent; the held legs recorded, the network fed its
+    own, the base placed by the leg odometry on the held feet; attrs `consistent` = "loop",
+    contacts: the rule on the file's own soles); None: the raw rollouts.
     `standing`: the pose to start from and return to (default: the robot's nominal one;
     generated files start from the model's, `generate_files`);
     `start_joint_velocities` (nj,): the joints' velocities at the start (default: at rest;
@@ -173,6 +174,8 @@ def generate_batch(
         "foot",
         "base_velocity",
     )
+    if generator.hold is not None:  # the held legs, recorded as the rollout's joints
+        names += ("held_joints", "held_joint_velocities")
     n = len(plan.active)
     out = {
         name: np.empty(
@@ -213,7 +216,9 @@ def generate_batch(
             joint_velocities=kept["joint_velocities"],
             attrs={"steering": bool(spec.steering), **(spec.attrs or {})},
         )
-        if generator.hold is not None:
+        if generator.hold is not None:  # the held legs (the network was fed its own)
+            trajectory.joint_positions = kept["held_joints"]
+            trajectory.joint_velocities = kept["held_joint_velocities"]
             trajectory.contacts = own_contacts(trajectory, generator.hold.solver, contact_params)
             trajectory.attrs["consistent"] = "loop"
             trajectory.attrs["consistent_residual_max_m"] = float(generator.hold.residual[row])
