@@ -81,6 +81,13 @@ LIFT_PRIORITY = 3.0
 # a held stance whose flat sole its leg leaves farther than this from the floor pose (an ankle
 # at its limit under a foot the network keeps tilted) rests at the network's tilt instead
 FLAT_MISS = 0.005  # m
+# a post frame whose leg the solver left beyond `tolerance` from the network's joints (a
+# stall: its neighbours, solved, reach the same targets) is solved again from the previous
+# frame's solved leg, then the next one's, this many times over (a failure next to a failure
+# mends once its neighbour has). On w0's authors' test 12 frames' lifting feet sank back
+# below the contact rule's off height (up to 0.12 m from their targets), the rule counted
+# the feet down 2 frames longer while they blended away at 1-2 m/s
+RETRY_PASSES = 3
 LEGS = np.array(LEG_JOINTS).reshape(2, 6)  # study joints of the left and the right leg
 _CORNERS = np.vstack([SOLE_CORNERS.T, np.ones(len(SOLE_CORNERS))])  # (4, C) homogeneous
 _EYE3, _EYE6 = np.eye(3), np.eye(6)
@@ -489,6 +496,38 @@ def post_holds(
     return np.stack([ramp, ramp * low], axis=-1), held, middles
 
 
+def retry_from_neighbours(
+    solver: LegSolver,
+    solution: LegSolution,
+    targets: np.ndarray,
+    active: np.ndarray,
+    lifting: np.ndarray,
+    tolerance: float,
+) -> LegSolution:
+    """`solution` of every frame of a trajectory (targets (T, 2, 4, 4), base frame) with each
+    leg the solver left beyond `tolerance` solved again from its previous frame's solved joints,
+    then from its next frame's (`RETRY_PASSES` times): a leg keeps the smaller residual."""
+    joints, residual = solution.joints.copy(), solution.residual.copy()
+    for shift in (1, -1) * RETRY_PASSES:
+        failed = active & (residual > tolerance)
+        failed[[0, -1][shift < 0]] = False  # no neighbour on that side
+        rows = np.flatnonzero(failed.any(axis=1))
+        if not len(rows):
+            break
+        start, on = joints[rows], failed[rows]
+        for foot in range(2):
+            start[np.ix_(on[:, foot], LEGS[foot])] = joints[rows - shift][
+                np.ix_(on[:, foot], LEGS[foot])
+            ]
+        again = solver.solve(start, targets[rows], on, on, lifting[rows])
+        better = on & (again.residual < residual[rows])
+        for foot in range(2):
+            pick = better[:, foot]
+            joints[np.ix_(rows[pick], LEGS[foot])] = again.joints[np.ix_(pick, LEGS[foot])]
+            residual[rows[pick], foot] = again.residual[pick, foot]
+    return LegSolution(joints, residual, solution.iterations)
+
+
 def make_consistent(
     trajectory: Trajectory,
     robot: Robot,
@@ -506,11 +545,13 @@ def make_consistent(
     weights, held, middle = post_holds(soles, contacts, blend_frames(params, dt), contact_params)
     raw_joints = np.asarray(trajectory.joint_positions, float)
     lifting = weights[..., 1] < weights[..., 0]
+    tolerance = float(params.tolerance)
     active = weights.max(axis=-1) > 0.0  # every held or blending foot brought to tolerance:
     # with 3 iterations alone a lifting foot stayed up to 0.17 m from its target and slid
     rest = np.broadcast_to(np.eye(4), soles.shape).copy()  # flat on the floor
     targets = inverse(base)[:, None] @ hold_targets(soles, held, weights, rest)
     solution = solver.solve(raw_joints, targets, active, active, lifting)
+    solution = retry_from_neighbours(solver, solution, targets, active, lifting, tolerance)
     held_frames = weights.min(axis=-1) >= 1.0
     # a stance its leg cannot hold flat (an ankle at its limit under a tilted foot) rests at the
     # network's tilt of its middle frame instead, its lowest corner on the floor
@@ -524,6 +565,7 @@ def make_consistent(
         rest[tilted] = resting[tilted]
         targets = inverse(base)[:, None] @ hold_targets(soles, held, weights, rest)
         solution = solver.solve(raw_joints, targets, active, active, lifting)
+        solution = retry_from_neighbours(solver, solution, targets, active, lifting, tolerance)
     held = held_frames
     out = dataclasses.replace(
         trajectory,
