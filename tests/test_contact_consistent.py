@@ -15,7 +15,12 @@ from scipy.spatial.transform import Rotation
 from pimann.core.contacts import FEET, foot_kinematics, trajectory_configurations, true_runs
 from pimann.core.params import MotionSegment, load_params
 from pimann.core.robot import LEFT_SOLE, LEG_JOINTS, RIGHT_SOLE
-from pimann.generate.contact_consistent import LegSolver, make_consistent
+from pimann.generate.contact_consistent import (
+    LegSolution,
+    LegSolver,
+    make_consistent,
+    retry_from_neighbours,
+)
 
 GLIDE = 0.03  # m the base (and so every foot on the floor) is pushed during one stance
 
@@ -306,3 +311,29 @@ def test_simulate_runs_read_the_variant_they_name(tmp_path, params):
         )
         with pytest.raises(PimannError, match=message):
             simulate_runs(tmp_path / "rollouts", tmp_path / "sim", tmp_path / "s.json", study)
+
+
+def test_a_stalled_leg_is_solved_again_from_its_neighbours(robot, params, gait):
+    """A frame whose leg the solver left far from its target (a stall) is solved again from
+    the next frame's solved leg, and reaches it as its neighbours do."""
+    solver = LegSolver(robot, params.rollout.consistent)
+    frames = np.arange(100, 110)
+    joints = np.asarray(gait.joint_positions, float)[frames]
+    targets = solver.soles(joints)  # reachable: the gait's own soles
+    stalled = joints.copy()
+    stalled[4, LEG_JOINTS[:6]] += 0.5  # frame 4's left leg far off, as a stall leaves it
+    active = np.zeros((len(frames), 2), dtype=bool)
+    active[:, 0] = True
+    residual = np.zeros(active.shape)
+    residual[4, 0] = 0.1
+    solution = retry_from_neighbours(
+        solver,
+        LegSolution(stalled, residual, 3),
+        targets,
+        active,
+        np.zeros(active.shape, dtype=bool),
+        params.rollout.consistent.tolerance,
+    )
+    assert solution.residual[4, 0] <= params.rollout.consistent.tolerance
+    np.testing.assert_allclose(solution.joints[4], joints[4], atol=1e-3)
+    np.testing.assert_array_equal(solution.joints[[3, 5]], stalled[[3, 5]])
