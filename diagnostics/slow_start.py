@@ -65,12 +65,12 @@ from pimann.generate.benchmark_clips import held_out_clips
 from pimann.generate.command_script import ScriptSteps
 from pimann.learn.adherent_train import load_adherent_model
 from pimann.learn.dataset import FeatureDataset, read_dataset
-from pimann.learn.features import REST_WINDOW_S, starts_from_rest
 from pimann.learn.model_files import META_FILE, load_model
 from pimann.learn.motion_classes import STANDING_SPEED
 from pimann.learn.standing import StandingPose
 
 REST_SPEED = STANDING_SPEED  # m/s: slower is at rest (the motion classes' standing)
+REST_WINDOW_S = 0.2  # s over which a clip's start speed is measured
 SET_OFF_DISTANCE = 0.02  # m from its first position: a clip has set off
 SLOW_BAND, FAST_BAND = (0.3, 0.5), (0.7, 0.9)  # m/s, the future window's forward speed
 SERIES_S, SERIES_EVERY_S = 2.0, 0.1  # the first seconds printed, one row every
@@ -122,12 +122,12 @@ def clip_starts(collection: str | Path, params: Params) -> pd.DataFrame:
             {
                 "clip": name,
                 "start_speed": float(speed[0]),
-                "from_rest": starts_from_rest(trajectory),
+                "from_rest": bool(speed[0] < REST_SPEED),
                 "rest_s": set_off / rate,
                 "speed_0_1s": _mean_speed(position, rate, set_off, set_off + second),
                 "speed_1_2s": _mean_speed(position, rate, set_off + second, set_off + 2 * second),
                 "median_speed": float(np.median(speed)),
-                "set_off_sampled": bool(set_off / rate >= 1.0 and starts_from_rest(trajectory)),
+                "set_off_sampled": bool(set_off / rate >= 1.0 and speed[0] < REST_SPEED),
             }
         )
     return pd.DataFrame(rows)

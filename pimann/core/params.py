@@ -156,9 +156,6 @@ class FeaturesParams:
     time_reversed: list[Literal["forward", "backward", "side", "diagonal", "turning"]]
     gait_phase: bool  # the gait phase in the state (pimann.learn.gait_phase; not the paper)
     gait_phase_step_s: Positive  # the longest step: a longer gap is a pause
-    # a clip that starts from rest is preceded by its first frame held for the input window's
-    # past, so its set-off is sampled as a rollout starts (pimann.learn.features; not the paper)
-    rest_start_padding: bool
 
 
 @dataclass(frozen=True, config=CONFIG)

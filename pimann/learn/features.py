@@ -42,13 +42,7 @@ from pimann.core.trajectory import Trajectory
 from pimann.learn.dataset import FeatureDataset
 from pimann.learn.feature_layout import FeatureLayout, Normalisation, window_layout
 from pimann.learn.gait_phase import gait_phase, phase_vector
-from pimann.learn.motion_classes import (
-    CLASSES,
-    STANDING_SPEED,
-    class_counts,
-    majority_class,
-    spread_pick,
-)
+from pimann.learn.motion_classes import CLASSES, class_counts, majority_class, spread_pick
 from pimann.learn.standing import data_standing
 
 log = logging.getLogger(__name__)
@@ -183,52 +177,6 @@ def with_time_reversed(
     return [*clips, *added]
 
 
-REST_WINDOW_S = 0.2  # s over which a clip's start speed is measured
-
-
-def starts_from_rest(trajectory: Trajectory) -> bool:
-    """Whether the clip's base moves under `STANDING_SPEED` (planar) over its first 0.2 s."""
-    frames = max(1, round(REST_WINDOW_S * float(trajectory.rate_hz)))
-    position = np.asarray(trajectory.base_position, dtype=float)
-    if len(position) <= frames:
-        return False
-    travel = np.hypot(*(position[frames, :2] - position[0, :2]))
-    return bool(travel * float(trajectory.rate_hz) / frames < STANDING_SPEED)
-
-
-def rest_padded(trajectory: Trajectory, frames: int) -> Trajectory:
-    """The clip preceded by its first frame held `frames` frames (earlier times, same clock).
-
-    The features drop every step whose past window leaves the clip, so a clip's first second
-    is never an input's present: a set-off from rest is sampled only where a take stood still
-    a full second first. A rollout starts exactly so (the standing pose, a past window at
-    rest), and the data's few such set-offs teach a slow command from rest to creep
-    (docs/slow_start.md). Holding the first frame gives each clip that starts from rest its
-    set-off with the past the rollout's start has. Joint velocities are not carried: the
-    features take differences."""
-    if frames <= 0:
-        return trajectory
-    rate = float(trajectory.rate_hz)
-    time = np.asarray(trajectory.time, dtype=float)
-    earlier = time[0] - np.arange(frames, 0, -1) / rate
-
-    def held(values: np.ndarray) -> np.ndarray:
-        values = np.asarray(values)
-        return np.concatenate([np.repeat(values[:1], frames, axis=0), values])
-
-    contacts = trajectory.contacts
-    return Trajectory(
-        time=np.concatenate([earlier, time]),
-        base_position=held(trajectory.base_position),
-        base_quaternion_xyzw=held(trajectory.base_quaternion_xyzw),
-        joint_positions=held(trajectory.joint_positions),
-        source=trajectory.source,
-        rate_hz=trajectory.rate_hz,
-        contacts=None if contacts is None else held(contacts),
-        attrs={**(trajectory.attrs or {}), "rest_padded_frames": frames},
-    )
-
-
 def settled_contacts(contacts: np.ndarray, margin: int) -> np.ndarray:
     """(T, 2) contact flags kept only `margin` frames or more away from a switch of that foot.
 
@@ -293,21 +241,6 @@ def build_dataset(
     layout = window_layout(params, rates.pop(), variant)
     test_sources = split_sources([t for _, t in clips], params.test_fraction, params.split_seed)
     clips = with_time_reversed(clips, params.time_reversed, test_sources)
-    standing = data_standing(t for _, t in clips if t.source not in test_sources)
-    log.info("standing pose (%s): generation starts from it", standing.origin)
-    # the past window plus the frame whose difference starts the first one
-    pad = 1 - min(layout.input_offsets) if params.rest_start_padding else 0
-    padded = [pad if pad and starts_from_rest(t) else 0 for _, t in clips]
-    clips = [
-        (name, rest_padded(t, frames)) for (name, t), frames in zip(clips, padded, strict=True)
-    ]
-    if pad:
-        log.info(
-            "%d of %d clips start from rest: %d frames held before each",
-            sum(1 for frames in padded if frames),
-            len(clips),
-            pad,
-        )
     names = [name for name, _ in clips]
     sources = [t.source for _, t in clips]
     with_contacts = all(t.contacts is not None for _, t in clips)
@@ -321,8 +254,7 @@ def build_dataset(
         if len(steps) == 0:
             log.debug("clip %s (%d frames) is shorter than the windows", name, len(trajectory))
             short.append(name)
-        # the step in the clip's own frames, before any held ones
-        origin = np.stack([np.full(len(steps), k), steps - padded[k]], axis=1)
+        origin = np.stack([np.full(len(steps), k), steps], axis=1)
         contacts = np.zeros((len(steps), 2), bool)
         if with_contacts:
             contacts = settled_contacts(trajectory.contacts, margin)[steps]
@@ -349,6 +281,8 @@ def build_dataset(
             params.input, f"empty split: {len(x_train)} train, {len(x_test)} test samples"
         )
     stats = Normalisation.fit(x_train, y_train)
+    standing = data_standing(t for _, t in clips if t.source not in test_sources)
+    log.info("standing pose (%s): generation starts from it", standing.origin)
     return FeatureDataset(
         x_train=stats.normalise_x(x_train).astype(np.float32),
         y_train=stats.normalise_y(y_train).astype(np.float32),
