@@ -16,9 +16,13 @@ from pimann.core.contacts import FEET, foot_kinematics, trajectory_configuration
 from pimann.core.params import MotionSegment, load_params
 from pimann.core.robot import LEFT_SOLE, LEG_JOINTS, RIGHT_SOLE
 from pimann.generate.contact_consistent import (
+    FLAT_SHARE,
+    MAX_HOLD_GAP,
+    MAX_LIFT_GAP,
     LegSolution,
     LegSolver,
     make_consistent,
+    post_holds,
     retry_from_neighbours,
 )
 
@@ -337,3 +341,24 @@ def test_a_stalled_leg_is_solved_again_from_its_neighbours(robot, params, gait):
     assert solution.residual[4, 0] <= params.rollout.consistent.tolerance
     np.testing.assert_allclose(solution.joints[4], joints[4], atol=1e-3)
     np.testing.assert_array_equal(solution.joints[[3, 5]], stalled[[3, 5]])
+
+
+def test_a_lifting_foot_is_leashed_looser_than_one_on_the_floor(params):
+    """A stance whose network foot swings forward past MAX_HOLD_GAP from the held middle pose
+    at its end: while that foot is up (lowest corner above FLAT_SHARE x the off height) the
+    hold stays where it was (within MAX_LIFT_GAP); the same foot flat on the floor drags it."""
+    off = float(params.contacts.off_height)
+    reach = 0.5 * (MAX_HOLD_GAP + MAX_LIFT_GAP)  # beyond the floor's leash, within the lift's
+    contacts = np.zeros((30, 2), dtype=bool)
+    contacts[:20] = True
+    for height, dragged in ((0.5 * (1.0 + FLAT_SHARE) * off, False), (0.0, True)):
+        soles = np.broadcast_to(np.eye(4), (30, 2, 4, 4)).copy()
+        soles[15:20, 0, 0, 3] = reach  # the network's left foot off at the stance's end ...
+        soles[15:20, 0, 2, 3] = height  # ... up, or on the floor
+        _, held, _ = post_holds(soles, contacts, 5, params.contacts)
+        moved = held[15:20, 0, 0]
+        if dragged:
+            np.testing.assert_allclose(moved, reach - MAX_HOLD_GAP, atol=1e-9)
+        else:
+            np.testing.assert_allclose(moved, 0.0, atol=1e-9)
+        np.testing.assert_allclose(held[:15, 0, :2], 0.0, atol=1e-9)

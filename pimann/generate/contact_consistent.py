@@ -71,6 +71,14 @@ FLAT_SHARE = 0.5
 # the hip-to-sole distance (the leg's length) held less (median 17.6 against 15.1)
 MAX_HOLD_GAP = 0.15  # m
 MAX_HOLD_TURN = 0.5  # rad
+# ... and within this of it horizontally while the network's foot is up (its lowest corner
+# above FLAT_SHARE x the off height: a lift-off, where the rule's switch time still counts the
+# foot down while the network's swings it forward at 1-3 m/s). At MAX_HOLD_GAP the leash
+# dragged the held foot after the network's in those counted frames: on the trained models'
+# post variants (authors, forward, mixed; both steerings; seeds 0, 1) the frames the leash
+# held made 2-8 of w=10's 19-24 forward and steered sliding. Tried 0.2, 0.25, 0.35: 0.25 and
+# 0.35 moved a w=10 steered touchdown (cadence 1.75 -> 1.875), 0.2 no MANN's of w <= 20
+MAX_LIFT_GAP = 0.2  # m
 # a lifting foot (vertical weight below the horizontal one) that its leg cannot reach weighs
 # its height and tilt this many times its horizontal place: it rises with the network's
 # foot, so the rule sees the lift-off when the network's does. Tried 1, 3, 10 (position-level
@@ -364,17 +372,18 @@ class SoleHolder:
         return hold_targets(soles, self.held, weight), weight
 
 
-def leash(held: np.ndarray, soles: np.ndarray) -> np.ndarray:
+def leash(
+    held: np.ndarray, soles: np.ndarray, gap: float | np.ndarray = MAX_HOLD_GAP
+) -> np.ndarray:
     """Held (x, y, yaw) (B, 2, 3) moved towards the network's soles (B, 2, 4, 4) just enough to
-    stay within `MAX_HOLD_GAP` of their origins horizontally and `MAX_HOLD_TURN` of their yaw:
-    a foot the network carries far from where it landed (a turn on the spot, a long shuffle) is
-    followed rather than held out of its leg's reach."""
+    stay within `gap` (m; a scalar or (B, 2)) of their origins horizontally and `MAX_HOLD_TURN`
+    of their yaw: a foot the network carries far from where it landed (a turn on the spot, a
+    long shuffle) is followed rather than held out of its leg's reach."""
     out = held.copy()
-    gap = held[..., :2] - soles[..., :2, 3]
-    distance = np.linalg.norm(gap, axis=-1, keepdims=True)
-    out[..., :2] = soles[..., :2, 3] + gap * np.minimum(
-        1.0, MAX_HOLD_GAP / np.maximum(distance, 1e-12)
-    )
+    offset = held[..., :2] - soles[..., :2, 3]
+    distance = np.linalg.norm(offset, axis=-1, keepdims=True)
+    limit = np.asarray(gap, dtype=float)[..., None] if np.ndim(gap) else gap
+    out[..., :2] = soles[..., :2, 3] + offset * np.minimum(1.0, limit / np.maximum(distance, 1e-12))
     yaw = yaw_of(soles[..., :3, :3])
     turn = np.arctan2(np.sin(held[..., 2] - yaw), np.cos(held[..., 2] - yaw))
     out[..., 2] = yaw + np.clip(turn, -MAX_HOLD_TURN, MAX_HOLD_TURN)
@@ -462,11 +471,12 @@ def post_holds(
     hold is of (T, 2), -1: none) of a finished trajectory's feet, world soles (T, 2, 4, 4) and
     the rule's contacts (T, 2). Knowing the whole trajectory, each stance [a, b) is held from
     the frame before its touchdown ([a - 1, b - 1]: the central difference of its first contact
-    frame sees no move) at the network's sole pose (x, y, yaw) of its middle frame (leashed):
-    the hold then sits at most half the network's glide from the network's foot, at the
-    touchdown and at the lift-off. The horizontal weight rises over the `frames` frames before
-    a - 1, in the air, and falls over those after b - 1, along a smoothstep (3 u^2 - 2 u^3):
-    the foot leaves the hold slowly while the rule may still count it down. The vertical
+    frame sees no move) at the network's sole pose (x, y, yaw) of its middle frame (leashed:
+    `MAX_HOLD_GAP`, `MAX_LIFT_GAP` while the network's foot is up): the hold then sits at
+    most half the network's glide from the network's foot, at the touchdown and at the
+    lift-off. The horizontal weight rises over the `frames` frames before
+    a - 1, in the air, and falls over those after b - 1, along a smootherstep (10 u^3 - 15 u^4
+    + 6 u^5): the foot leaves the hold slowly while the rule may still count it down. The vertical
     weight as `SoleHolder`'s: the horizontal one times the flatness of the network's lowest
     corner (1 below FLAT_SHARE x the off height, 0 at it), so the foot rises with the
     network's at the lift-off and the rule sees it leave when it sees the network's. Measured
@@ -477,7 +487,8 @@ def post_holds(
     b: 27.6 / 12.4; the touchdown pose: 19.5 / 11.2, the gait's touchdowns no longer the raw
     ones); with the stalled legs solved again from their neighbours (`retry_from_neighbours`)
     13.6 / 10.9, and the smoothstep blends 12.4 / 10.0 (the linear ones moved the foot 20% of
-    its gap in the frame after the last contact, which the rule's central difference counts)."""
+    its gap in the frame after the last contact, which the rule's central difference counts;
+    the smootherstep 6%: with `MAX_LIFT_GAP` 11.3 / 9.7 -> 10.9 / 9.5)."""
     count = len(soles)
     ramp = np.zeros(contacts.shape)
     held = np.zeros((*contacts.shape, 3))
@@ -488,16 +499,16 @@ def post_holds(
         for a, b in true_runs(contacts[:, foot]):
             first, last = max(a - 1, 0), b - 1
             weight = np.clip(1.0 - np.maximum(first - steps, steps - last) / frames, 0.0, 1.0)
-            weight = weight * weight * (3.0 - 2.0 * weight)  # smoothstep: eases off the hold
+            weight = weight**3 * (10.0 - 15.0 * weight + 6.0 * weight * weight)  # smootherstep
             take = (weight > ramp[:, foot]) | (weight >= 1.0)  # a shared blend: the larger
             ramp[take, foot] = weight[take]
             middle = (a + b - 1) // 2
             held[take, foot, :2] = soles[middle, foot, :2, 3]
             held[take, foot, 2] = yaws[middle, foot]
             middles[take, foot] = middle
-    held = leash(held, soles)
     off = float(contact_params.off_height)
     low = np.clip((off - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * off), 0.0, 1.0)
+    held = leash(held, soles, np.where(low < 1.0, MAX_LIFT_GAP, MAX_HOLD_GAP))
     return np.stack([ramp, ramp * low], axis=-1), held, middles
 
 
