@@ -47,6 +47,7 @@ from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import Robot, load_robot
 from pimann.core.rotations import quaternion_xyzw_matrices, yaw_of
 from pimann.core.trajectory import Trajectory, iter_collection
+from pimann.evaluate.consistency_measures import joint_distance
 from pimann.evaluate.data_reference import FRAMES, MIN_FORWARD_FRAMES, clip_reference
 from pimann.evaluate.metrics import trajectory_metrics
 from pimann.generate.contact_consistent import LegSolver, make_consistent
@@ -84,14 +85,6 @@ def measures(trajectory: Trajectory, robot: Robot, params: Params) -> dict[str, 
         "authors_clip": FRAMES * metrics[AUTHORS] / (frames - 1),  # frame 0 has no step
         "touchdowns": metrics["touchdowns"],
     }
-
-
-def joint_distance(raw: np.ndarray, held: np.ndarray) -> tuple[float, float]:
-    """(RMS, largest) distance of the joints to the raw ones over every frame and joint, as
-    pimann.evaluate.consistency_measures measures a variant against its raw twin."""
-    frames = min(len(raw), len(held))
-    distance = np.asarray(held[:frames], float) - np.asarray(raw[:frames], float)
-    return float(np.sqrt(np.mean(distance**2))), float(np.abs(distance).max())
 
 
 def clip_row(

@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -49,7 +48,7 @@ from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import Robot, load_robot
 from pimann.core.rollout_files import SCRIPT_ATTR, script_json
 from pimann.core.trajectory import Trajectory
-from pimann.evaluate.gait import AT_SPEED, at_achieved_speed, gait_level, windows_of
+from pimann.evaluate.gait import AT_SPEED, at_achieved_speed, gait_level, windows_of, within
 from pimann.evaluate.metrics import trajectory_metrics
 from pimann.generate.adherent_rollout import (
     LOOP_FIRST_INPUT,
@@ -130,7 +129,7 @@ def _inside(value: Any, low: Any, high: Any) -> bool | None:
     """value in [low, high] as at_achieved_speed judges it; None where the data has no level."""
     if low is None or high is None:
         return None
-    return value is not None and math.isfinite(value) and low - 1e-9 <= value <= high + 1e-9
+    return within(value, low, high)
 
 
 def judged(gait: dict[str, Any], windows: Sequence[dict[str, Any]], band: float) -> dict:

@@ -51,12 +51,19 @@ def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
     out["consistent_residual_max_m"] = trajectory.attrs.get("consistent_residual_max_m")
     twin = rollout_path(root, dataclasses.replace(key, scenario=scenario))
     if twin.is_file():
-        raw = read_trajectory(twin).joint_positions
-        frames = min(len(raw), len(trajectory))
-        distance = trajectory.joint_positions[:frames] - raw[:frames]
-        out["joint_distance_rms_rad"] = float(np.sqrt(np.mean(distance**2)))
-        out["joint_distance_max_rad"] = float(np.abs(distance).max())
+        rms, largest = joint_distance(
+            read_trajectory(twin).joint_positions, trajectory.joint_positions
+        )
+        out["joint_distance_rms_rad"], out["joint_distance_max_rad"] = rms, largest
     return out
+
+
+def joint_distance(raw: np.ndarray, variant: np.ndarray) -> tuple[float, float]:
+    """(RMS, largest) distance of a variant's joints (T, nj) to the raw ones over every frame
+    (the shorter's) and joint."""
+    frames = min(len(raw), len(variant))
+    distance = np.asarray(variant[:frames], float) - np.asarray(raw[:frames], float)
+    return float(np.sqrt(np.mean(distance**2))), float(np.abs(distance).max())
 
 
 def with_consistency_columns(

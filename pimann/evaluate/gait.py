@@ -392,6 +392,12 @@ def _finite(value: Any) -> float | None:
     return value if math.isfinite(value) else None
 
 
+def within(value: Any, low: float, high: float) -> bool:
+    """Whether a measure (None or NaN: not measured, so not inside) lies in [low, high]."""
+    own = _finite(value)
+    return own is not None and low - 1e-9 <= own <= high + 1e-9
+
+
 def at_achieved_speed(
     row: dict[str, Any], windows: Sequence[dict[str, Any]], band: float
 ) -> dict[str, Any]:
@@ -427,8 +433,7 @@ def at_achieved_speed(
         )
         if low is None:
             return columns
-        own = _finite(row.get(f"gait_{name}"))
-        inside.append(own is not None and low - 1e-9 <= own <= high + 1e-9)
+        inside.append(within(row.get(f"gait_{name}"), low, high))
     columns["gait_in_data_range"] = all(inside)
     return columns
 

@@ -1,13 +1,12 @@
 """Contact-consistent trajectories: a foot in contact stays where it landed (docs/consistent.md).
 
 The network's feet glide at the position level while the contact rule says they are down. A
-contact-consistent trajectory holds each sole at its touchdown pose while it is in contact
-(the study's rule, pimann.core.contacts, with the `contacts` params, on the lowest corner of
-the network's sole): the sole origin's horizontal position and yaw at touchdown, the sole flat
-(roll = pitch = 0) with its origin on the floor (z = 0). Each leg's 6 joints are re-solved so
-that the sole reaches its target; the base pose, the upper body and a foot in swing stay the
-network's. Touchdown and lift-off blend over n = `blend_s` frames (`SoleHolder`): no joint
-jumps, and a foot that leaves the floor for less than n frames keeps its hold.
+contact-consistent trajectory holds each sole in place while it is in contact (the study's
+rule, pimann.core.contacts, with the `contacts` params, on the lowest corner of the network's
+sole): at one horizontal position and yaw, the sole flat (roll = pitch = 0) with its origin on
+the floor (z = 0). Each leg's 6 joints are re-solved so that the sole reaches its target; the
+base pose, the upper body and a foot in swing stay the network's. Touchdown and lift-off blend
+over n = `blend_s` frames, so no joint jumps.
 
 The legs are solved together for every frame (or every rollout of a batch) at once: damped
 Gauss-Newton on the sole's 6D error (position, and the vee of the rotation error's skew
@@ -25,9 +24,11 @@ sdot = sdot_raw + (dq_k - dq_{k-1}) / dt with dq = q - q_raw. Where the network'
 agree with its positions they agree with the new ones too, and a joint the correction leaves
 alone (the upper body, a leg in swing) keeps the network's velocity exactly.
 
-Two ways: `make_consistent` post-processes a finished trajectory (every frame at once);
-`InLoopHold` does one step of a batch of rollouts, which the batched generator applies inside
-its loop (pimann.generate.batch_generator, `consistent`) so that the network sees the held legs.
+Two ways: `make_consistent` post-processes a finished trajectory (every frame at once), each
+stance held at its middle frame's pose over the whole stance (`post_holds`); `InLoopHold` does
+one step of a batch of rollouts, held at the touchdown pose as the stance goes (`SoleHolder`),
+which the batched generator applies inside its loop (pimann.generate.batch_generator,
+`consistent`): the held legs are recorded and place the base, the network is fed its own.
 """
 
 from __future__ import annotations
@@ -362,9 +363,7 @@ class SoleHolder:
             self.held[landing, 2] = yaw_of(soles[landing, :3, :3])
         self.held = leash(self.held, soles)
         self.ramp = np.clip(self.ramp + np.where(contacts, self.rate, -self.rate), 0.0, 1.0)
-        low = (self.off_height - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * self.off_height)
-        low = np.clip(low, 0.0, 1.0)
-        return np.stack([self.ramp, self.ramp * low], axis=-1)
+        return np.stack([self.ramp, self.ramp * flatness(soles, self.off_height)], axis=-1)
 
     def step(self, soles: np.ndarray, contacts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(targets (B, 2, 4, 4) world, weights (B, 2, 2)) of one frame."""
@@ -421,6 +420,13 @@ def resting_tilt(soles: np.ndarray) -> np.ndarray:
     out = homogeneous(np.zeros(tilt.shape[:-2] + (3,)), tilt)
     out[..., 2, 3] = -(out[..., 2:3, :] @ _CORNERS)[..., 0, :].min(axis=-1)
     return out
+
+
+def flatness(soles: np.ndarray, off_height: float) -> np.ndarray:
+    """(..., 2) how far each foot is held flat on the floor: 1 while the network's lowest
+    corner is below `FLAT_SHARE` x the rule's off height, falling linearly to 0 at it."""
+    low = (off_height - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * off_height)
+    return np.clip(low, 0.0, 1.0)
 
 
 def rollout_contacts(heights: np.ndarray, dt: float, params: ContactParams) -> np.ndarray:
@@ -506,8 +512,7 @@ def post_holds(
             held[take, foot, :2] = soles[middle, foot, :2, 3]
             held[take, foot, 2] = yaws[middle, foot]
             middles[take, foot] = middle
-    off = float(contact_params.off_height)
-    low = np.clip((off - lowest_heights(soles)) / ((1.0 - FLAT_SHARE) * off), 0.0, 1.0)
+    low = flatness(soles, float(contact_params.off_height))
     held = leash(held, soles, np.where(low < 1.0, MAX_LIFT_GAP, MAX_HOLD_GAP))
     return np.stack([ramp, ramp * low], axis=-1), held, middles
 
@@ -564,10 +569,16 @@ def make_consistent(
     tolerance = float(params.tolerance)
     active = weights.max(axis=-1) > 0.0  # every held or blending foot brought to tolerance:
     # with 3 iterations alone a lifting foot stayed up to 0.17 m from its target and slid
+    to_base = inverse(base)[:, None]
+
+    def solved(rest: np.ndarray) -> LegSolution:
+        """The legs solved towards the holds resting at `rest` (base frame targets)."""
+        targets = to_base @ hold_targets(soles, held, weights, rest)
+        solution = solver.solve(raw_joints, targets, active, active, lifting)
+        return retry_from_neighbours(solver, solution, targets, active, lifting, tolerance)
+
     rest = np.broadcast_to(np.eye(4), soles.shape).copy()  # flat on the floor
-    targets = inverse(base)[:, None] @ hold_targets(soles, held, weights, rest)
-    solution = solver.solve(raw_joints, targets, active, active, lifting)
-    solution = retry_from_neighbours(solver, solution, targets, active, lifting, tolerance)
+    solution = solved(rest)
     held_frames = weights.min(axis=-1) >= 1.0
     # a stance its leg cannot hold flat (an ankle at its limit under a tilted foot) rests at the
     # network's tilt of its middle frame instead, its lowest corner on the floor
@@ -579,10 +590,7 @@ def make_consistent(
     if tilted.any():
         resting = resting_tilt(soles[middle.clip(0), np.arange(soles.shape[1])])
         rest[tilted] = resting[tilted]
-        targets = inverse(base)[:, None] @ hold_targets(soles, held, weights, rest)
-        solution = solver.solve(raw_joints, targets, active, active, lifting)
-        solution = retry_from_neighbours(solver, solution, targets, active, lifting, tolerance)
-    held = held_frames
+        solution = solved(rest)
     out = dataclasses.replace(
         trajectory,
         joint_positions=solution.joints,
@@ -593,7 +601,7 @@ def make_consistent(
         attrs={
             **trajectory.attrs,
             "consistent": "post",
-            "consistent_residual_max_m": float(np.where(held, solution.residual, 0.0).max()),
+            "consistent_residual_max_m": float(np.where(held_frames, solution.residual, 0.0).max()),
         },
     )
     out.contacts = own_contacts(out, solver, contact_params)
