@@ -2,7 +2,7 @@
 at 0.4 m/s from the same start, with the evidence.
 
     python -m diagnostics.slow_start --model models/w10/0 [--model models/adherent/0 ...]
-        [--slow 0.4] [--fast 0.8] [--swap-s 0.2 1.0] [--seconds 10]
+        [--slow 0.4] [--fast 0.8] [--swap-s 0.2 1.0] [--seconds 10] [--takes]
 
 prints:
 1. Data coverage (the features stage's training side): how many training clips start from
@@ -12,7 +12,10 @@ prints:
    first second of every clip is never an input's present); the training samples at rest
    (the past window's planar speed under 0.1 m/s at every past offset) by the speed their
    future window asks for, the slow and the fast band; the gait phase at rest (what the
-   rollout's start, phase 0, meets there).
+   rollout's start, phase 0, meets there). With --takes, the same starts on the pelvis of
+   every take of every source (`max_takes` ignored: what the paper profile reads), cut into
+   clips as the retargeting cuts them, per source and by whether this profile picks the take:
+   whether the rest of the shared data holds set-offs from rest the profile leaves out.
 2. Per model: the authors' unsteered protocol (`rollout.protocols.authors`, its rollout keys)
    at --slow and, from the same start, at --fast: the network's predicted forward base
    velocity (its current sample), the legs' realised forward velocity (leg odometry), both
@@ -49,7 +52,7 @@ import torch
 
 from pimann.core.contacts import touchdowns
 from pimann.core.errors import PimannError
-from pimann.core.params import MotionSegment, Params, load_params
+from pimann.core.params import DataParams, MotionSegment, Params, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
 from pimann.core.trajectory import iter_collection
@@ -68,10 +71,12 @@ from pimann.learn.dataset import FeatureDataset, read_dataset
 from pimann.learn.model_files import META_FILE, load_model
 from pimann.learn.motion_classes import STANDING_SPEED
 from pimann.learn.standing import StandingPose
+from pimann.mocap.clips import clip_motion, read_take, select_takes, source_takes, take_clips
 
 REST_SPEED = STANDING_SPEED  # m/s: slower is at rest (the motion classes' standing)
 REST_WINDOW_S = 0.2  # s over which a clip's start speed is measured
 SET_OFF_DISTANCE = 0.02  # m from its first position: a clip has set off
+WALKING_AFTER = 0.3  # m/s in the second second after a set-off: it turned into walking
 SLOW_BAND, FAST_BAND = (0.3, 0.5), (0.7, 0.9)  # m/s, the future window's forward speed
 SERIES_S, SERIES_EVERY_S = 2.0, 0.1  # the first seconds printed, one row every
 START_PHASES = (0.5 * np.pi, np.pi, 1.5 * np.pi)  # the slow run's other starts (rad)
@@ -97,37 +102,82 @@ def _mean_speed(position: np.ndarray, rate: float, start: int, stop: int) -> flo
     return float(np.hypot(*step) * rate / (stop - start))
 
 
+def start_row(position: np.ndarray, rate: float) -> dict[str, Any] | None:
+    """A clip's start (base or pelvis planar positions (T, >=2) at `rate` Hz): its start
+    speed, whether it starts from rest, how long it stands (until 2 cm from its start), the
+    speed it reaches in the first and the second second after setting off, its median speed,
+    and whether a feature sample sees the set-off from a past at rest (it stands at least the
+    input window's past span, 1 s). None: a clip too short to tell."""
+    window = max(1, round(REST_WINDOW_S * rate))
+    if len(position) <= 2 * rate + window:
+        return None
+    speed = _forward_speed(position, window, rate)
+    moved = np.hypot(*(position[:, :2] - position[0, :2]).T) >= SET_OFF_DISTANCE
+    set_off = int(np.argmax(moved)) if moved.any() else len(position)
+    second = round(rate)
+    return {
+        "start_speed": float(speed[0]),
+        "from_rest": bool(speed[0] < REST_SPEED),
+        "rest_s": set_off / rate,
+        "speed_0_1s": _mean_speed(position, rate, set_off, set_off + second),
+        "speed_1_2s": _mean_speed(position, rate, set_off + second, set_off + 2 * second),
+        "median_speed": float(np.median(speed)),
+        "set_off_sampled": bool(set_off / rate >= 1.0 and speed[0] < REST_SPEED),
+    }
+
+
 def clip_starts(collection: str | Path, params: Params) -> pd.DataFrame:
-    """One row per unmirrored training clip of the collection: its start speed, whether it
-    starts from rest, how long it stands, the speed it reaches in the first and the second
-    second after setting off (2 cm from its start), its median speed, and whether a feature
-    sample sees the set-off from a past at rest (it stands at least the input window's past
-    span, 1 s)."""
+    """One `start_row` per unmirrored training clip of the retargeted collection."""
     test = {name for name, _ in held_out_clips(collection, params)}
     rows = []
     for name, trajectory in iter_collection(collection):
         if name in test or trajectory.attrs.get("mirrored", False):
             continue
-        rate = float(trajectory.rate_hz)
-        window = max(1, round(REST_WINDOW_S * rate))
         position = np.asarray(trajectory.base_position, dtype=float)
-        if len(position) <= 2 * rate + window:
-            continue
-        speed = _forward_speed(position, window, rate)
-        moved = np.hypot(*(position[:, :2] - position[0, :2]).T) >= SET_OFF_DISTANCE
-        set_off = int(np.argmax(moved)) if moved.any() else len(position)
-        second = round(rate)
+        row = start_row(position, float(trajectory.rate_hz))
+        if row is not None:
+            rows.append({"clip": name, **row})
+    return pd.DataFrame(rows)
 
+
+def source_starts(data: DataParams) -> pd.DataFrame:
+    """One `start_row` per clip of every take of every source, `max_takes` ignored (what the
+    paper profile reads), on the mocap's pelvis before retargeting, cut as the retargeting
+    cuts (pimann.mocap.clips.take_clips); `picked`: the take is in `data`'s own selection.
+    Whether more takes of the shared data would add set-offs from rest."""
+    picked = {take.name for take in select_takes(data)}
+    rows = []
+    for key, source in data.sources.items():
+        every = dataclasses.replace(source, max_takes=None)
+        for take in source_takes(key, every, data):
+            motion = read_take(take)
+            for clip in take_clips(take, motion, source.clip_s, source.max_speed):
+                part = clip_motion(motion, clip)
+                row = start_row(part.pelvis_position, float(part.rate_hz))
+                if row is not None:
+                    rows.append(
+                        {"source": key, "clip": clip.name, "picked": take.name in picked, **row}
+                    )
+    return pd.DataFrame(rows)
+
+
+def source_start_summary(starts: pd.DataFrame) -> pd.DataFrame:
+    """Per source and selection (picked by the profile or only in the whole data): clips, those
+    starting from rest, those standing >= 1 s first (a sample sees the set-off), and of these
+    how many walk (over 0.3 m/s) in their second second after setting off."""
+    rows = []
+    for (source, picked), group in starts.groupby(["source", "picked"], sort=True):
+        rest = group[group["from_rest"]]
+        sampled = rest[rest["set_off_sampled"]]
         rows.append(
             {
-                "clip": name,
-                "start_speed": float(speed[0]),
-                "from_rest": bool(speed[0] < REST_SPEED),
-                "rest_s": set_off / rate,
-                "speed_0_1s": _mean_speed(position, rate, set_off, set_off + second),
-                "speed_1_2s": _mean_speed(position, rate, set_off + second, set_off + 2 * second),
-                "median_speed": float(np.median(speed)),
-                "set_off_sampled": bool(set_off / rate >= 1.0 and speed[0] < REST_SPEED),
+                "source": source,
+                "picked": bool(picked),
+                "clips": len(group),
+                "from_rest": len(rest),
+                "set_off_sampled": len(sampled),
+                "walk_after": int((sampled["speed_1_2s"] > WALKING_AFTER).sum()),
+                "start_speed_median": float(group["start_speed"].median()),
             }
         )
     return pd.DataFrame(rows)
@@ -538,6 +588,11 @@ def main(argv: list[str] | None = None) -> int:
         "--features", type=Path, default=REPO_ROOT / "data" / "features" / "full.h5"
     )
     parser.add_argument("--no-data", action="store_true", help="skip the data coverage")
+    parser.add_argument(
+        "--takes",
+        action="store_true",
+        help="also every take of the shared mocap (max_takes ignored): its clips' starts",
+    )
     args = parser.parse_args(argv)
     params = load_params()
     (authors,) = [s for s in params.rollout.protocols["authors"].script]
@@ -560,6 +615,14 @@ def main(argv: list[str] | None = None) -> int:
             print(f"training samples of {args.features}:")
             for key, value in rest_coverage(dataset).items():
                 print(f"  {key}: {value}")
+        if args.takes:
+            starts = source_starts(params.data)
+            print(
+                "\n1b. every take of the shared mocap (max_takes ignored; picked: in this"
+                f" profile's selection), its clips' starts on the pelvis ('{params.profile}')"
+            )
+            with wide():
+                print(source_start_summary(starts).round(2).to_string(index=False))
         robot = load_robot()
         for model_dir in args.model:
             probe = run_probe(model_dir, params, slow, fast, seconds, args.swap_s, robot)

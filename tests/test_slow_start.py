@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch
 from builders import RATE, SMALL_MODEL, STANDING_JOINTS
@@ -20,6 +21,9 @@ from diagnostics.slow_start import (
     outcomes,
     rest_coverage,
     run_probe,
+    source_start_summary,
+    source_starts,
+    start_row,
 )
 from pimann.core.params import load_params
 from pimann.core.robot import load_robot
@@ -80,6 +84,55 @@ def test_clip_starts_find_the_starts_from_rest_and_their_speed(tmp_path):
         assert row["speed_0_1s"] == pytest.approx(speed, abs=0.02)
         assert row["speed_1_2s"] == pytest.approx(speed, abs=1e-9)
         assert row["set_off_sampled"] == (rest_s >= 1.0)
+
+
+def test_start_row_of_a_pelvis_standing_then_walking():
+    """A start row from bare positions, as the mocap survey takes it: 1.4 s at rest, then
+    0.4 m/s; a clip shorter than two seconds and the rest window is too short to tell."""
+    t = np.arange(300) / RATE
+    position = np.zeros((300, 3))
+    position[:, 0] = 0.4 * np.clip(t - 1.4, 0.0, None)
+    row = start_row(position, RATE)
+    assert row["from_rest"] and row["set_off_sampled"]
+    assert row["speed_1_2s"] == pytest.approx(0.4, abs=1e-9)
+    assert start_row(position[: int(2 * RATE)], RATE) is None
+
+
+def test_source_start_summary_counts_by_source_and_selection():
+    starts = pd.DataFrame(
+        [
+            {"source": "a", "picked": True, "from_rest": True, "set_off_sampled": True,
+             "speed_1_2s": 0.5, "start_speed": 0.0},
+            {"source": "a", "picked": True, "from_rest": True, "set_off_sampled": True,
+             "speed_1_2s": 0.1, "start_speed": 0.02},
+            {"source": "a", "picked": False, "from_rest": True, "set_off_sampled": False,
+             "speed_1_2s": 0.9, "start_speed": 0.05},
+            {"source": "b", "picked": False, "from_rest": False, "set_off_sampled": False,
+             "speed_1_2s": 1.0, "start_speed": 1.0},
+        ]
+    )  # fmt: skip
+    table = source_start_summary(starts).set_index(["source", "picked"])
+    assert table.loc[("a", True)][
+        ["clips", "from_rest", "set_off_sampled", "walk_after"]
+    ].tolist() == [2, 2, 2, 1]
+    assert table.loc[("a", False)][
+        ["clips", "from_rest", "set_off_sampled", "walk_after"]
+    ].tolist() == [1, 1, 0, 0]
+    assert table.loc[("b", False)]["from_rest"] == 0
+
+
+def test_source_starts_read_every_take_and_mark_the_profiles_pick():
+    """Bandai Namco's forward walks in the shared data, two of them picked: every take is read
+    (max_takes ignored), the pick marked, and each starts already walking."""
+    source = dataclasses.replace(
+        PARAMS.data.sources["bandai_namco"],
+        path="data/mocap/bandai-namco/dataset/*/data/dataset-1_walk_a*.bvh",
+        max_takes=2,
+    )
+    data = dataclasses.replace(PARAMS.data, sources={"bandai_namco": source})
+    starts = source_starts(data)
+    assert len(starts) == 4 and starts["picked"].sum() == 2
+    assert not starts["from_rest"].any() and (starts["start_speed"] > 0.3).all()
 
 
 def test_rest_coverage_counts_the_rest_samples_by_the_speed_asked():
