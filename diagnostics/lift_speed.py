@@ -18,18 +18,27 @@ from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
 
-from pimann.core.contacts import contacts_from_heights, frame_period, true_runs
+from pimann.core.contacts import (
+    SchmittTrigger,
+    contacts_from_heights,
+    frame_period,
+    true_runs,
+)
 from pimann.core.errors import PimannError
 from pimann.core.params import ContactParams, load_params
 from pimann.core.paths import REPO_ROOT
 from pimann.core.robot import Robot, load_robot
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
-from pimann.generate.contact_consistent import LegSolver, lowest_heights, world_soles
+from pimann.generate.contact_consistent import (
+    LegSolver,
+    lowest_heights,
+    rollout_contacts,
+    world_soles,
+)
 
 MIN_STANCE = 5  # frames: shorter contact runs are grazes, not stances
 PERCENTILES = (25, 50, 75, 90)
@@ -37,21 +46,26 @@ PERCENTILES = (25, 50, 75, 90)
 
 def counted_frames(params: ContactParams, dt: float) -> int:
     """Frames the rule still counts a foot down after its lowest corner has risen past the off
-    height: the trigger's delay (`switch_time` / dt, rounded up)."""
-    return max(1, int(np.ceil(float(params.switch_time) / dt - 1e-9)))
+    height: the trigger's delay (at least the last contact frame)."""
+    return max(1, SchmittTrigger.from_params(params, dt).delay_samples)
 
 
 def lift_speeds(
     trajectory: Trajectory,
     solver: LegSolver,
     params: ContactParams,
-    initial: bool | None = None,
+    rollout: bool = False,
 ) -> np.ndarray:
     """(L,) m/s: each lift-off's mean vertical sole-origin velocity over its counted frames;
-    `initial`: the rule's state at the first frame (None: from the first height)."""
+    the rule as the evaluate stage runs it on the data, or with `rollout` as the generator
+    runs it (both feet down at the start, `rollout_contacts`)."""
     dt = frame_period(trajectory)
     _, soles = world_soles(solver, trajectory)
-    contacts = contacts_from_heights(lowest_heights(soles), dt, params, initial=initial)
+    heights = lowest_heights(soles)
+    if rollout:
+        contacts = rollout_contacts(heights, dt, params)
+    else:
+        contacts = contacts_from_heights(heights, dt, params)
     rising = np.gradient(soles[..., 2, 3], dt, axis=0)
     last = counted_frames(params, dt)
     speeds = [
@@ -78,10 +92,9 @@ def data_speeds(
     collection: str | Path, every: int, solver: LegSolver, params: ContactParams
 ) -> np.ndarray:
     """Lift speeds of every `every`-th clip of a retargeted collection, pooled."""
-    clips: Iterable = iter_collection(collection)
     found = [
         lift_speeds(trajectory, solver, params)
-        for k, (_, trajectory) in enumerate(clips)
+        for k, (_, trajectory) in enumerate(iter_collection(collection))
         if k % every == 0
     ]
     return np.concatenate(found) if found else np.empty(0)
@@ -102,7 +115,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"data ({collection}, every {args.every}): {describe(data)}")
         if args.rollouts:
             rolled = [
-                lift_speeds(read_trajectory(path), solver, params.contacts, initial=True)
+                lift_speeds(read_trajectory(path), solver, params.contacts, rollout=True)
                 for path in args.rollouts
             ]
             print(f"rollouts ({len(args.rollouts)} files): {describe(np.concatenate(rolled))}")

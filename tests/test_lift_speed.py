@@ -19,7 +19,7 @@ def test_a_robot_lifted_at_a_known_speed_lifts_both_feet_at_it(robot, params, sp
     rise = speed * np.clip(np.arange(frames) / RATE - 0.5, 0.0, None)
     trajectory = make_trajectory(np.zeros((frames, 2)), z=rise)
     solver = LegSolver(robot, params.rollout.consistent)
-    speeds = lift_speeds(trajectory, solver, params.contacts, initial=True)
+    speeds = lift_speeds(trajectory, solver, params.contacts, rollout=True)
     assert counted_frames(params.contacts, 1.0 / RATE) == 2
     np.testing.assert_allclose(speeds, [speed, speed], atol=1e-6)
     assert describe(speeds).startswith("2 lift-offs") and describe(speeds[:0]) == "no lift-off"
@@ -28,4 +28,4 @@ def test_a_robot_lifted_at_a_known_speed_lifts_both_feet_at_it(robot, params, sp
 def test_a_stance_cut_by_the_end_is_no_lift_off(robot, params):
     trajectory = make_trajectory(np.zeros((40, 2)))
     solver = LegSolver(robot, params.rollout.consistent)
-    assert len(lift_speeds(trajectory, solver, params.contacts, initial=True)) == 0
+    assert len(lift_speeds(trajectory, solver, params.contacts, rollout=True)) == 0
