@@ -6,10 +6,10 @@
 Per scenario of `rollout.consistent.scenarios` and steering: for every model the medians over
 its seeds of the position-level sliding and the authors' metric (raw / post / loop), the
 travel over the gait window, the rollouts that walk, the step length (raw / loop: post keeps
-the raw base and gait), the joints' RMS distance to the raw twin and the largest held-sole
-residual (post / loop); then the MuJoCo runs of a variant beside the same run of its raw
-rollout. Reads the evaluate and simulate stages' outputs only. Outside the pipeline: nothing
-imports this module.
+the raw base and gait), the joints' RMS distance to the raw twin, the legs' largest joint
+speed and the largest held-sole residual (post / loop); then the MuJoCo runs of a variant
+beside the same run of its raw rollout. Reads the evaluate and simulate stages' outputs only.
+Outside the pipeline: nothing imports this module.
 """
 
 from __future__ import annotations
@@ -52,6 +52,12 @@ def variant_tables(metrics: pd.DataFrame) -> str:
         ("walks (of seeds): raw / loop", "walks", ("raw", "loop"), 0),
         ("step (m): raw / loop", "gait_step_length", ("raw", "loop"), 2),
         ("joints RMS (rad): post / loop", "joint_distance_rms_rad", ("post", "loop"), 3),
+        (
+            "leg joint speed, largest (rad/s): raw / post / loop",
+            "leg_joint_speed_max_rad_s",
+            VARIANTS,
+            0,
+        ),
         ("residual (m): post / loop", "consistent_residual_max_m", ("post", "loop"), 3),
     ]
     out = []

@@ -20,6 +20,7 @@ def _row(model, seed, scenario, variant, sliding, **extra):
         "walks": True,
         "gait_step_length": 0.2,
         "joint_distance_rms_rad": float("nan") if variant == "raw" else 0.05,
+        "leg_joint_speed_max_rad_s": 8.0,
         "consistent_residual_max_m": float("nan") if variant == "raw" else 0.01,
         **extra,
     }

@@ -298,6 +298,12 @@ def test_the_rollout_stage_writes_and_evaluate_measures_the_variants(tmp_path, p
         np.abs(distance).max()
     )
     assert (frame["penetration_max_m"] >= 0).all()
+    # the legs' largest joint speed, raw and held, from the joints' first differences
+    for scenario, trajectory in (("short", raw), ("short+post", post)):
+        speeds = np.abs(np.diff(trajectory.joint_positions[:, LEG_JOINTS], axis=0)) * 50.0
+        assert rows.loc[(scenario, True), "leg_joint_speed_max_rad_s"] == pytest.approx(
+            speeds.max()
+        )
 
 
 def test_simulate_runs_read_the_variant_they_name(tmp_path, params):

@@ -7,6 +7,9 @@ the sliding measures, for every rollout (raw ones too, where they apply).
 - `joint_distance_rms_rad`, `joint_distance_max_rad`: the joints' distance to the raw twin
   (the same model, seed, scenario and steering), RMS and largest over every frame and joint;
   empty for a raw rollout;
+- `leg_joint_speed_max_rad_s`: the legs' largest joint speed, from the joints' first
+  differences (every rollout): a hold that straightens a leg by the end of a stance folds it
+  fast at the release;
 - `consistent_residual_max_m`: the largest distance of a held sole from its target that the
   leg IK left (the file's attrs; empty for a raw rollout).
 """
@@ -21,6 +24,7 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.parallel import pool_map
+from pimann.core.robot import LEG_JOINTS
 from pimann.core.rollout_files import RAW, RolloutKey, rollout_path, split_variant
 
 COLUMNS = (
@@ -28,26 +32,30 @@ COLUMNS = (
     "penetration_max_m",
     "joint_distance_rms_rad",
     "joint_distance_max_rad",
+    "leg_joint_speed_max_rad_s",
     "consistent_residual_max_m",
 )
 
 
 def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
     """The columns of one rollout but the penetration (`trajectory_metrics`' pass has the
-    soles): a variant read with its raw twin; a raw rollout is not read."""
+    soles): a variant read with its raw twin."""
     from pimann.core.trajectory import read_trajectory
 
     root, key = job
     scenario, variant = split_variant(key.scenario)
+    trajectory = read_trajectory(rollout_path(root, key))
     out: dict[str, Any] = {
         "rollout_variant": variant,
         "joint_distance_rms_rad": None,
         "joint_distance_max_rad": None,
+        "leg_joint_speed_max_rad_s": leg_joint_speed_max(
+            trajectory.joint_positions, trajectory.time
+        ),
         "consistent_residual_max_m": None,
     }
     if variant == RAW:
         return out
-    trajectory = read_trajectory(rollout_path(root, key))
     out["consistent_residual_max_m"] = trajectory.attrs.get("consistent_residual_max_m")
     twin = rollout_path(root, dataclasses.replace(key, scenario=scenario))
     if twin.is_file():
@@ -56,6 +64,15 @@ def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
         )
         out["joint_distance_rms_rad"], out["joint_distance_max_rad"] = rms, largest
     return out
+
+
+def leg_joint_speed_max(joints: np.ndarray, time: np.ndarray) -> float:
+    """rad/s: the largest first-difference speed of the leg joints (`LEG_JOINTS`) of joints
+    (T, nj) at `time` (T,); 0 for a single frame."""
+    if len(joints) < 2:
+        return 0.0
+    legs = np.asarray(joints, float)[:, LEG_JOINTS]
+    return float((np.abs(np.diff(legs, axis=0)) / np.diff(np.asarray(time, float))[:, None]).max())
 
 
 def joint_distance(raw: np.ndarray, variant: np.ndarray) -> tuple[float, float]:
