@@ -8,8 +8,9 @@ the sliding measures, for every rollout (raw ones too, where they apply).
   (the same model, seed, scenario and steering), RMS and largest over every frame and joint;
   empty for a raw rollout;
 - `leg_joint_speed_max_rad_s`: the legs' largest joint speed, from the joints' first
-  differences (every rollout): a hold that straightens a leg by the end of a stance folds it
-  fast at the release;
+  differences (every rollout; pimann.evaluate.metrics.leg_joint_speed_max, measured by
+  `trajectory_metrics`' pass like the penetration): a hold that straightens a leg by the end
+  of a stance folds it fast at the release;
 - `consistent_residual_max_m`: the largest distance of a held sole from its target that the
   leg IK left (the file's attrs; empty for a raw rollout).
 """
@@ -24,7 +25,6 @@ import numpy as np
 import pandas as pd
 
 from pimann.core.parallel import pool_map
-from pimann.core.robot import LEG_JOINTS
 from pimann.core.rollout_files import RAW, RolloutKey, rollout_path, split_variant
 
 COLUMNS = (
@@ -38,24 +38,21 @@ COLUMNS = (
 
 
 def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
-    """The columns of one rollout but the penetration (`trajectory_metrics`' pass has the
-    soles): a variant read with its raw twin."""
+    """The columns of one rollout but the penetration and the leg joint speed (`trajectory_
+    metrics`' pass reads them): a variant read with its raw twin; a raw rollout is not read."""
     from pimann.core.trajectory import read_trajectory
 
     root, key = job
     scenario, variant = split_variant(key.scenario)
-    trajectory = read_trajectory(rollout_path(root, key))
     out: dict[str, Any] = {
         "rollout_variant": variant,
         "joint_distance_rms_rad": None,
         "joint_distance_max_rad": None,
-        "leg_joint_speed_max_rad_s": leg_joint_speed_max(
-            trajectory.joint_positions, trajectory.time
-        ),
         "consistent_residual_max_m": None,
     }
     if variant == RAW:
         return out
+    trajectory = read_trajectory(rollout_path(root, key))
     out["consistent_residual_max_m"] = trajectory.attrs.get("consistent_residual_max_m")
     twin = rollout_path(root, dataclasses.replace(key, scenario=scenario))
     if twin.is_file():
@@ -64,15 +61,6 @@ def _measures(job: tuple[Path, RolloutKey]) -> dict[str, Any]:
         )
         out["joint_distance_rms_rad"], out["joint_distance_max_rad"] = rms, largest
     return out
-
-
-def leg_joint_speed_max(joints: np.ndarray, time: np.ndarray) -> float:
-    """rad/s: the largest first-difference speed of the leg joints (`LEG_JOINTS`) of joints
-    (T, nj) at `time` (T,); 0 for a single frame."""
-    if len(joints) < 2:
-        return 0.0
-    legs = np.asarray(joints, float)[:, LEG_JOINTS]
-    return float((np.abs(np.diff(legs, axis=0)) / np.diff(np.asarray(time, float))[:, None]).max())
 
 
 def joint_distance(raw: np.ndarray, variant: np.ndarray) -> tuple[float, float]:
@@ -87,7 +75,7 @@ def with_consistency_columns(
     frame: pd.DataFrame, root: str | Path, keys: list[RolloutKey], workers: int = 1
 ) -> pd.DataFrame:
     """`frame` (one row per rollout of `keys` under `root`, in order, with `trajectory_metrics`'
-    `penetration_max_m`) with `COLUMNS` last, in their order."""
+    `penetration_max_m` and `leg_joint_speed_max_rad_s`) with `COLUMNS` last, in their order."""
     jobs = [(Path(root), key) for key in keys]
     rows = pd.DataFrame(pool_map(_measures, jobs, workers, "consistency measures"))
     frame = pd.concat([frame, rows.set_index(frame.index)], axis=1)

@@ -84,6 +84,7 @@ SUMMARY_METRICS = [
     "penetration_max_m",
     "joint_distance_rms_rad",
     "joint_distance_max_rad",
+    "leg_joint_speed_max_rad_s",
     "consistent_residual_max_m",
 ]
 BASE_COLUMNS = ["time", "base_x", "base_y", "base_z", "base_roll", "base_pitch", "base_yaw"]

@@ -52,7 +52,7 @@ from pimann.core.contacts import (
 )
 from pimann.core.errors import PimannError, about
 from pimann.core.params import ContactParams, EvaluateParams
-from pimann.core.robot import SOLE_CORNERS, Robot, load_robot
+from pimann.core.robot import LEG_JOINTS, SOLE_CORNERS, Robot, load_robot
 from pimann.core.rotations import quaternion_xyzw_matrices, rpy_arcsin_pitch, to_heading_frame
 from pimann.core.trajectory import Trajectory, iter_collection, read_trajectory
 from pimann.evaluate.gait import trajectory_gait
@@ -287,6 +287,15 @@ def foot_split(a: Analysis) -> dict[str, float]:
     }
 
 
+def leg_joint_speed_max(joints: np.ndarray, time: np.ndarray) -> float:
+    """rad/s: the largest first-difference speed of the leg joints (`LEG_JOINTS`) of joints
+    (T, nj) at `time` (T,); 0 for a single frame."""
+    if len(joints) < 2:
+        return 0.0
+    legs = np.asarray(joints, float)[:, LEG_JOINTS]
+    return float((np.abs(np.diff(legs, axis=0)) / np.diff(np.asarray(time, float))[:, None]).max())
+
+
 def trajectory_metrics(
     trajectory: Trajectory,
     robot: Robot | None,
@@ -361,6 +370,8 @@ def trajectory_metrics(
     metrics.update(gait)
     # how far the lowest sole corner goes below the floor (a contact-consistent variant's check)
     metrics["penetration_max_m"] = float(max(0.0, -a.feet.heights.min()))
+    # the legs' largest joint speed (a contact-consistent variant folds its legs at a release)
+    metrics["leg_joint_speed_max_rad_s"] = leg_joint_speed_max(trajectory.joint_positions, a.time)
     return metrics
 
 
