@@ -45,9 +45,16 @@ TINY = {
 
 
 def _run(command: list[str], cwd: Path) -> str:
-    """`command` in `cwd` with the clone's own pimann; its output (stdout and stderr)."""
+    """`command` in `cwd` with the clone's own pimann; its output (stdout and stderr).
+
+    `dvc` is this interpreter's module, and this interpreter's folder leads PATH, so the
+    stages' `python` (dvc.yaml) is the one running the tests: a venv's python works without the
+    venv activated (nothing of it on PATH)."""
+    if command[0] == "dvc":
+        command = [sys.executable, "-m", "dvc", *command[1:]]
     env = {
         **os.environ,
+        "PATH": os.pathsep.join([str(Path(sys.executable).parent), os.environ.get("PATH", "")]),
         "PYTHONPATH": str(cwd),
         "OMP_NUM_THREADS": "1",
         "PIMANN_THREADS": "1",
